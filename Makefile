@@ -1,0 +1,71 @@
+# OCSLAM: every target creates what it needs itself (virtual environment, packages, browser).
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(PY) -m pip
+OCSLAM := $(VENV)/bin/ocslam
+HOST ?= 127.0.0.1
+PORT ?= 8080
+ARGS ?=
+PYTEST_ARGS ?=
+
+.PHONY: setup run test test-fast bench train browser lint clean help
+
+help:
+	@echo "make run    set up .venv and start the web app on http://$(HOST):$(PORT)"
+	@echo "make test   set up .venv (+ test extras, chromium) and run the whole suite"
+	@echo "make bench  run every benchmark and print the tables"
+	@echo "make train  install the [train] extra and train the detector (about an hour)"
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+# Re-install when the project's metadata changes.
+$(VENV)/.installed: pyproject.toml | $(PY)
+	$(PIP) install --quiet --upgrade pip
+	$(PIP) install --quiet -e .
+	@touch $@
+
+$(VENV)/.installed-test: pyproject.toml $(VENV)/.installed
+	$(PIP) install --quiet -e ".[test]"
+	@touch $@
+
+setup: $(VENV)/.installed
+
+run: setup
+	@echo "OCSLAM: open http://$(HOST):$(PORT) in your browser (Ctrl-C stops)"
+	$(OCSLAM) run --host $(HOST) --port $(PORT) $(ARGS)
+
+# Debian's chromium for the browser test (playwright install cannot download browsers here).
+browser:
+	@if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then \
+	  true; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing Debian's chromium for the browser tests"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+	    || echo "WARNING: apt-get install chromium failed; browser tests will be skipped"; \
+	else \
+	  echo "NOTE: chromium is not installed and this is not root: run 'sudo apt-get install chromium'"; \
+	  echo "      (or set OCSLAM_CHROMIUM=/path/to/chromium); the browser tests will be skipped."; \
+	fi
+
+test: $(VENV)/.installed-test browser
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+test-fast: $(VENV)/.installed-test
+	$(PY) -m pytest -m "not slow and not browser" $(PYTEST_ARGS)
+
+bench: setup
+	$(OCSLAM) bench all $(ARGS)
+
+train: setup
+	$(PIP) install --quiet -e ".[train]"
+	$(OCSLAM) train-detector $(ARGS)
+
+lint: $(VENV)/.installed-test
+	$(PY) -m pip install --quiet ruff mypy
+	$(VENV)/bin/ruff check app tests
+	$(VENV)/bin/mypy app/ocslam --ignore-missing-imports
+
+clean:
+	rm -rf $(VENV) .pytest_cache build *.egg-info

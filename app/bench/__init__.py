@@ -1,0 +1,1 @@
+"""``ocslam bench …`` benchmarks, one module each (``add_arguments`` + ``run``)."""

@@ -1,0 +1,115 @@
+"""The ``ocslam`` command line.
+
+Each sub-command lives in its own module that defines ``add_arguments(parser)`` and
+``run(args) -> int``; this file only lists them, so commands can be added without touching each
+other. Every ``ocslam bench …`` command accepts ``--json``.
+
+    ocslam run [--headless] [--world FILE] [--config FILE] [--set section.key=value ...]
+    ocslam world random --seed N --out FILE
+    ocslam dataset --worlds N --per-world M --seed S --out DIR
+    ocslam train-detector --data DIR
+    ocslam export map|objects|session ...
+    ocslam bench sim|slam|detector|objects|ui|loop|all [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+#: name → (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("app.commands.run", "run the simulation (web app, or --headless)"),
+    "world": ("app.commands.world", "world files: validate, random"),
+    "dataset": ("app.commands.dataset", "render an auto-labelled YOLO dataset from the simulator"),
+    "train-detector": ("app.commands.train_detector", "train the YOLO detector (needs the [train] extra)"),
+    "export": ("app.commands.export", "export maps, objects and sessions"),
+}
+
+BENCHES: dict[str, tuple[str, str]] = {
+    "sim": ("app.bench.sim", "simulator step, LIDAR and camera timings, headless real-time factor"),
+    "slam": ("app.bench.slam", "SLAM on a CARMEN log against the Kümmerle et al. relations"),
+    "detector": ("app.bench.detector", "detector precision/recall/mAP and latency on held-out renders"),
+    "objects": ("app.bench.objects", "the object map against ground truth (the paper's results table)"),
+    "ui": ("app.bench.ui", "server CPU and bytes per tick per client"),
+    "loop": ("app.bench.loop", "the complete loop's per-stage time and real-time factor"),
+}
+
+
+def _load(module: str):
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        if e.name and module.startswith(e.name):
+            return None
+        raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ocslam", description="Object-Conscious SLAM in a simulated apartment.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, help_text) in COMMANDS.items():
+        mod = _load(module)
+        if mod is None:
+            continue
+        p = sub.add_parser(name, help=help_text, description=(mod.__doc__ or help_text).strip().splitlines()[0])
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    bench = sub.add_parser("bench", help="benchmarks (each prints a table, or JSON with --json)")
+    bsub = bench.add_subparsers(dest="bench", metavar="BENCH")
+    for name, (module, help_text) in BENCHES.items():
+        mod = _load(module)
+        if mod is None:
+            continue
+        p = bsub.add_parser(name, help=help_text)
+        mod.add_arguments(p)
+        if not any(a.dest == "json" for a in p._actions):
+            p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
+        p.set_defaults(_run=mod.run)
+    pall = bsub.add_parser("all", help="run every benchmark with its default arguments")
+    pall.add_argument("--json", action="store_true")
+    pall.add_argument("--quick", action="store_true", help="shorter runs")
+    pall.set_defaults(_run=_bench_all)
+    return parser
+
+
+def _bench_all(args: argparse.Namespace) -> int:
+    mod = _load("app.bench.all")
+    if mod is None:
+        print("ocslam bench all: no benchmarks are installed", file=sys.stderr)
+        return 2
+    return int(mod.run(args))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not hasattr(args, "_run"):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except Exception as e:  # a clear one-line error, not a traceback, for user-facing failures
+        from app.config import ConfigError
+
+        known = (ConfigError, FileNotFoundError)
+        try:
+            from app.worlds import WorldError
+
+            known = known + (WorldError,)
+        except ImportError:
+            pass
+        try:
+            from app.ocslam.detector import DetectorError
+
+            known = known + (DetectorError,)
+        except ImportError:
+            pass
+        if isinstance(e, known):
+            print(f"ocslam: error: {e}", file=sys.stderr)
+            return 2
+        raise

@@ -1,0 +1,1 @@
+"""``ocslam`` sub-commands, one module each (``add_arguments`` + ``run``)."""

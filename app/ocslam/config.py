@@ -1,0 +1,226 @@
+"""Typed configuration sections of the algorithm core.
+
+Each section is a dataclass; each field is declared with :func:`param`, which records its range,
+step, unit, help text and whether it may change while the loop runs (``live``). The same metadata
+validates YAML files and CLI overrides and builds the GUI sliders, so the three can never disagree.
+
+The root object that gathers these with the simulator's and UI's sections is ``app.config.Config``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+
+class ConfigError(ValueError):
+    """A configuration value or file is invalid. The message names the offending key."""
+
+
+def param(
+    default: Any,
+    *,
+    min: float | None = None,
+    max: float | None = None,
+    step: float | None = None,
+    unit: str = "",
+    help: str = "",
+    live: bool = False,
+    choices: Sequence[Any] | None = None,
+) -> Any:
+    """Declare a config field with its metadata (range, step, unit, help, live-tunable, choices)."""
+    meta = {
+        "min": min,
+        "max": max,
+        "step": step,
+        "unit": unit,
+        "help": help,
+        "live": live,
+        "choices": tuple(choices) if choices is not None else None,
+    }
+    if isinstance(default, (list, dict, set)):
+        return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def coerce_value(section: str, f: dataclasses.Field, value: Any) -> Any:
+    """Convert ``value`` to the field's type and check its range/choices; raise :class:`ConfigError`."""
+    key = f"{section}.{f.name}"
+    meta = f.metadata
+    default = f.default if f.default is not dataclasses.MISSING else None
+    ftype = type(default) if default is not None else None
+    try:
+        if ftype is bool:
+            if isinstance(value, str):
+                low = value.strip().lower()
+                if low in ("1", "true", "yes", "on"):
+                    value = True
+                elif low in ("0", "false", "no", "off"):
+                    value = False
+                else:
+                    raise ValueError(value)
+            elif isinstance(value, (bool, int)) and value in (0, 1, True, False):
+                value = bool(value)
+            else:
+                raise ValueError(value)
+        elif ftype is int:
+            if isinstance(value, bool):
+                raise ValueError(value)
+            if isinstance(value, float) and not value.is_integer():
+                raise ValueError(value)
+            value = int(value)
+        elif ftype is float:
+            if isinstance(value, bool):
+                raise ValueError(value)
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(value)
+        elif ftype is str:
+            if not isinstance(value, str):
+                raise ValueError(value)
+        elif ftype in (list, tuple) or (default is None and f.default_factory is not dataclasses.MISSING):  # type: ignore[misc]
+            if isinstance(value, tuple):
+                value = list(value)
+            if not isinstance(value, list):
+                raise ValueError(value)
+    except (TypeError, ValueError):
+        tname = ftype.__name__ if ftype else "value"
+        raise ConfigError(f"{key}: expected a {tname}, got {value!r}") from None
+    if meta.get("choices") is not None and value not in meta["choices"]:
+        raise ConfigError(f"{key}: {value!r} is not one of {list(meta['choices'])}")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        lo, hi = meta.get("min"), meta.get("max")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise ConfigError(f"{key}: {value!r} is outside [{lo}, {hi}]{(' ' + meta['unit']) if meta.get('unit') else ''}")
+    return value
+
+
+def validate_section(section: str, obj: Any) -> None:
+    """Check every field of a section instance; raise :class:`ConfigError` on the first bad one."""
+    for f in dataclasses.fields(obj):
+        setattr(obj, f.name, coerce_value(section, f, getattr(obj, f.name)))
+
+
+# ----------------------------------------------------------------------------------------------
+# Robot
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class RobotConfig:
+    """TurtleBot3 Burger geometry and limits (public dimensions)."""
+
+    wheel_radius_m: float = param(0.033, min=0.01, max=0.2, unit="m", help="wheel radius r")
+    wheel_separation_m: float = param(0.160, min=0.05, max=1.0, unit="m", help="distance l between the wheels")
+    max_linear_mps: float = param(0.22, min=0.01, max=2.0, step=0.01, unit="m/s", help="linear speed limit", live=True)
+    max_angular_rps: float = param(2.84, min=0.1, max=10.0, step=0.01, unit="rad/s", help="yaw rate limit", live=True)
+    footprint_radius_m: float = param(0.105, min=0.05, max=1.0, unit="m", help="circumscribed radius (path planning)")
+    odometry_mode: str = param(
+        "correct",
+        choices=("correct", "seed"),
+        help="'correct': l/2 inverse kinematics with l=0.160; 'seed': the original's ω·l with l=0.178",
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# SLAM
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class SlamConfig:
+    """Occupancy-grid graph SLAM (correlative scan matching, pose graph, loop closure)."""
+
+    enabled: bool = param(True, help="run SLAM (off: map = odom)")
+    resolution_m: float = param(0.05, min=0.01, max=0.5, unit="m", help="grid cell size")
+    max_range_m: float = param(20.0, min=0.5, max=100.0, unit="m", help="beams beyond this are not used")
+    free_clear_range_m: float = param(
+        3.0, min=0.0, max=100.0, unit="m", help="inf/max-range beams clear free space up to this distance"
+    )
+    log_odds_hit: float = param(0.85, min=0.01, max=5.0, help="log-odds added to a hit cell")
+    log_odds_miss: float = param(-0.4, min=-5.0, max=-0.01, help="log-odds added to a traversed cell")
+    log_odds_clamp: float = param(5.0, min=0.5, max=50.0, help="log-odds are clamped to ±this")
+    keyframe_distance_m: float = param(
+        0.2, min=0.0, max=5.0, step=0.05, unit="m", help="new keyframe after this travel", live=True
+    )
+    keyframe_heading_rad: float = param(
+        0.25, min=0.0, max=3.15, step=0.05, unit="rad", help="new keyframe after this rotation", live=True
+    )
+    match_search_xy_m: float = param(0.3, min=0.0, max=2.0, unit="m", help="scan-match window half-size (xy)")
+    match_search_yaw_rad: float = param(0.35, min=0.0, max=3.15, unit="rad", help="scan-match window half-size (yaw)")
+    loop_closure: bool = param(True, help="search for and add loop closures", live=True)
+    loop_search_radius_m: float = param(4.0, min=0.0, max=50.0, unit="m", help="loop candidates within this distance")
+    loop_min_score: float = param(0.55, min=0.0, max=1.0, step=0.01, help="loop closure acceptance score", live=True)
+    map_hz: float = param(1.0, min=0.1, max=10.0, help="map rebuild / publish rate (live app)")
+
+
+# ----------------------------------------------------------------------------------------------
+# Detector
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class DetectorConfig:
+    """YOLO detector run with onnxruntime (or the simulator's oracle for measurements)."""
+
+    kind: str = param("yolo", choices=("yolo", "oracle", "none"), help="yolo: the ONNX model; oracle: sim segmentation")
+    model_path: str = param("assets/models/detector.onnx", help="ONNX model (relative paths: project root)")
+    confidence: float = param(
+        0.4, min=0.01, max=0.99, step=0.01, help="YOLO confidence threshold (paper: 40 %)", live=True
+    )
+    nms_iou: float = param(0.5, min=0.05, max=0.95, step=0.05, help="class-aware NMS IoU threshold", live=True)
+    threads: int = param(2, min=1, max=16, help="onnxruntime intra-op threads")
+    input_size: int = param(0, min=0, max=1280, help="model input width (0: from the model file)")
+    oracle_min_pixels: int = param(60, min=1, max=100000, help="oracle: minimum visible pixels for a box")
+    oracle_min_visible_fraction: float = param(0.25, min=0.0, max=1.0, help="oracle: minimum visible fraction")
+    oracle_confidence_mean: float = param(0.85, min=0.0, max=1.0, help="oracle: mean confidence")
+    oracle_confidence_std: float = param(0.08, min=0.0, max=0.5, help="oracle: confidence noise σ")
+    oracle_box_jitter_px: float = param(3.0, min=0.0, max=50.0, unit="px", help="oracle: box edge noise σ")
+
+
+# ----------------------------------------------------------------------------------------------
+# Consciousness
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class ConsciousnessConfig:
+    """The paper's Consciousness node (Algorithm 1 + soft decision) and our improvements."""
+
+    mode: str = param(
+        "improved",
+        choices=("improved", "seed"),
+        help="seed: the original implementation's behaviour; improved: our fixes",
+        live=True,
+    )
+    tracking_threshold_m: float = param(
+        0.30, min=0.01, max=2.0, step=0.01, unit="m", help="same-class association distance (paper: 30 cm)", live=True
+    )
+    island_threshold_m: float = param(
+        0.10, min=0.01, max=1.0, step=0.01, unit="m", help="island buffer radius (paper: 10 cm)", live=True
+    )
+    presence_threshold: float = param(
+        0.8, min=0.0, max=1.0, step=0.01, help="objects shown at presence ≥ this (paper: 80 %)", live=True
+    )
+    rolling_average_weight: float = param(
+        0.9, min=0.0, max=1.0, step=0.01, help="weight of the old centre when merging (paper: 90 %)", live=True
+    )
+    frames_for_presence: int = param(
+        5, min=1, max=100, step=1, help="F: frames before an object counts as present (paper: 5)", live=True
+    )
+    decay_rate_per_s: float = param(
+        0.15, min=0.0, max=5.0, step=0.01, unit="1/s", help="improved: presence lost per second in view but unseen", live=True
+    )
+    max_object_range_m: float = param(
+        3.5, min=0.5, max=20.0, step=0.1, unit="m", help="improved: ignore islands / ghost checks beyond this", live=True
+    )
+    size_consistency_tolerance: float = param(
+        0.6, min=0.05, max=5.0, step=0.05, help="improved: relative range error allowed by the box-size check", live=True
+    )
+    legs: bool = param(True, help="improved: group leg islands into one object", live=True)
+    corner_check: bool = param(True, help="improved: reject islands inconsistent with the box (corner problem)", live=True)
+    ground_plane: bool = param(True, help="improved: place objects with no island by ground-plane ranging", live=True)
+    ghost_decay: bool = param(True, help="improved: decay presence of objects in view but not detected", live=True)
+    sync_tolerance_s: float = param(0.1, min=0.0, max=2.0, unit="s", help="improved: max image/scan stamp gap")

@@ -1,0 +1,66 @@
+"""The one config object: YAML, CLI overrides and slider-style sets share one validation."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.config import Config, ConfigError
+
+
+def test_defaults_are_the_papers_constants() -> None:
+    c = Config()
+    assert c.consciousness.tracking_threshold_m == 0.30
+    assert c.consciousness.island_threshold_m == 0.10
+    assert c.consciousness.presence_threshold == 0.8
+    assert c.consciousness.rolling_average_weight == 0.9
+    assert c.consciousness.frames_for_presence == 5
+    assert c.detector.confidence == 0.4
+    assert c.server.host == "127.0.0.1"
+    c.validate()
+
+
+def test_yaml_round_trip(tmp_path) -> None:
+    c = Config()
+    c.set("consciousness.tracking_threshold_m", 0.25)
+    c.set("consciousness.mode", "seed")
+    c.set("lidar.noise_std_m", 0.02)
+    p = c.save(tmp_path / "cfg.yaml")
+    d = Config.load(p)
+    assert d.to_dict() == c.to_dict()
+
+
+def test_overrides_and_types(tmp_path) -> None:
+    c = Config.load(None, ["slam.resolution_m=0.1", "consciousness.legs=false", "detector.threads=1", "sim.world=x.yaml"])
+    assert c.slam.resolution_m == 0.1 and c.consciousness.legs is False and c.detector.threads == 1
+    assert c.sim.world == "x.yaml"
+
+
+@pytest.mark.parametrize(
+    "key,value,msg",
+    [
+        ("consciousness.presence_threshold", 1.5, "outside"),
+        ("consciousness.mode", "fancy", "not one of"),
+        ("detector.threads", 1.5, "expected a int"),
+        ("lidar.noise_std_m", float("nan"), "expected a float"),
+        ("nosuch.key", 1, "unknown config section"),
+        ("slam.nosuch", 1, "unknown config key"),
+    ],
+)
+def test_bad_values_are_refused_with_the_key(key, value, msg) -> None:
+    c = Config()
+    with pytest.raises(ConfigError, match=msg):
+        c.set(key, value)
+
+
+def test_bad_files(tmp_path) -> None:
+    (tmp_path / "bad.yaml").write_text("sim: [unclosed\n")
+    with pytest.raises(ConfigError, match="malformed YAML"):
+        Config.load(tmp_path / "bad.yaml")
+    (tmp_path / "unk.yaml").write_text("foo: {}\n")
+    with pytest.raises(ConfigError, match="unknown section 'foo'"):
+        Config.load(tmp_path / "unk.yaml")
+    (tmp_path / "range.yaml").write_text("lidar:\n  beams: -3\n")
+    with pytest.raises(ConfigError, match="lidar.beams"):
+        Config.load(tmp_path / "range.yaml")
+    with pytest.raises(ConfigError, match="cannot read"):
+        Config.load(tmp_path / "missing.yaml")

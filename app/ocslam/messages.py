@@ -265,3 +265,40 @@ class TrackedObject:
     @property
     def class_id(self) -> int:
         return CLASS_INDEX[self.label]
+
+
+@dataclass(frozen=True, slots=True)
+class GroundTruthObject:
+    """A classified object as the simulator knows it (ground truth: only for evaluation and overlays).
+
+    ``pose`` and ``footprint`` (``(K, 2)`` polygon, counter-clockwise) are in ``frame_id``
+    (the simulator's ``world`` frame; ``app.pipeline`` re-expresses them in ``map``).
+    ``z_min``/``z_max`` bound the object's height above the floor; ``legged`` marks objects whose
+    LIDAR cross-section is several separate legs.
+    """
+
+    id: int
+    label: str
+    pose: Pose2
+    footprint: NDArray[np.float64]
+    z_min: float
+    z_max: float
+    legged: bool = False
+    name: str = ""
+    frame_id: str = "world"
+
+    @property
+    def height(self) -> float:
+        return self.z_max - self.z_min
+
+
+@dataclass(frozen=True, slots=True)
+class GroundTruthObstacle:
+    """An unclassified obstacle or wall piece (ground truth): ``(K, 2)`` polygon, height range."""
+
+    footprint: NDArray[np.float64]
+    z_min: float
+    z_max: float
+    kind: str = "obstacle"  # "wall" | "obstacle"
+    name: str = ""
+    frame_id: str = "world"

@@ -178,6 +178,9 @@ class DetectorConfig:
     oracle_confidence_mean: float = param(0.85, min=0.0, max=1.0, help="oracle: mean confidence")
     oracle_confidence_std: float = param(0.08, min=0.0, max=0.5, help="oracle: confidence noise σ")
     oracle_box_jitter_px: float = param(3.0, min=0.0, max=50.0, unit="px", help="oracle: box edge noise σ")
+    ignore_classes: list = param(
+        [], help="classes dropped after detection (the original drops duck and chair)"
+    )
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,0 +1,350 @@
+"""The YOLO object detector, run with onnxruntime (no torch at runtime).
+
+The paper's pipeline (spec §6): take the RGB camera image, downscale it to the network's input width
+(224 px: a 640×480 image becomes 224×168, padded to the stride multiple 224×192), run YOLOv8-nano, keep
+the boxes above the confidence threshold (40 %), and express them in original-image pixels as the
+``/yolo_boxes`` matrix ``x1, y1, x2, y2, class, floor(conf·100)``.
+
+The network's output is ultralytics' export layout ``[1, 4 + C, N]``: for each of N anchors the box
+centre, width and height in input pixels (``cx, cy, w, h``) followed by C class scores (already
+sigmoid-ed). Decoding keeps each anchor's best class, drops scores below the threshold, and runs
+class-aware NMS with OpenCV (``cv2.dnn.NMSBoxesBatched``), which reproduces ultralytics' own
+predictions on the same ONNX file.
+
+Example:
+    >>> det = Detector(DetectorConfig())                 # assets/models/detector.onnx
+    >>> dets = det.detect(image)                          # Image (H, W, 3) RGB8
+    >>> dets.yolo_boxes()                                 # (K, 6) int32, original-image pixels
+    >>> overlay = draw_detections(image.data, dets)
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from app.ocslam.config import DetectorConfig
+from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES, Detection, Detections, Image
+
+__all__ = [
+    "Detector",
+    "DetectorError",
+    "Letterbox",
+    "MAKE_MODEL_COMMAND",
+    "CLASS_COLORS",
+    "letterbox",
+    "decode_output",
+    "draw_detections",
+]
+
+#: How to (re)make the committed model; named in every "missing/corrupt model" error.
+MAKE_MODEL_COMMAND = (
+    "ocslam dataset --worlds 40 --per-world 50 --seed 1 --out datasets/sim && "
+    "ocslam train-detector --data datasets/sim   (needs: pip install -e '.[train]'; see docs/detector.md)"
+)
+
+#: One RGB colour per class (CLASS_NAMES order), distinct and readable on camera images.
+CLASS_COLORS: tuple[tuple[int, int, int], ...] = (
+    (255, 64, 64),  # ball
+    (255, 160, 32),  # dog
+    (220, 220, 0),  # gnome
+    (64, 200, 64),  # table
+    (0, 200, 200),  # chair
+    (64, 128, 255),  # door
+    (255, 230, 120),  # duck
+    (200, 64, 255),  # person
+    (255, 0, 128),  # extinguisher
+    (128, 255, 128),  # flowers
+    (170, 120, 60),  # shelf
+)
+
+#: Ultralytics' letterbox padding value.
+PAD_VALUE = 114
+STRIDE = 32
+
+
+class DetectorError(RuntimeError):
+    """The model file is missing, corrupt or incompatible, or an input image is malformed."""
+
+
+@dataclass(frozen=True, slots=True)
+class Letterbox:
+    """How an image was fitted into the network input: ``input = original · scale + (pad_x, pad_y)``."""
+
+    scale: float
+    pad_x: float
+    pad_y: float
+    input_width: int
+    input_height: int
+
+
+def input_shape_for(width: int, height: int, input_width: int, stride: int = STRIDE) -> tuple[int, int]:
+    """Network input ``(width, height)`` for a dynamic model: ``input_width`` wide, the image's aspect,
+    the height rounded up to the stride (the paper's 640×480 at 224 → 224×168 → 224×192)."""
+    h = int(round(height * input_width / width))
+    return input_width, int(math.ceil(h / stride) * stride)
+
+
+def letterbox(
+    rgb: NDArray[np.uint8], input_width: int, input_height: int
+) -> tuple[NDArray[np.float32], Letterbox]:
+    """Downscale ``(H, W, 3)`` uint8 RGB to fit ``input_width × input_height`` keeping its aspect, pad
+    the rest with grey 114 (centred, as ultralytics does), and return the ``(1, 3, h, w)`` float32 NCHW
+    tensor in [0, 1] with the :class:`Letterbox` that maps boxes back."""
+    h, w = rgb.shape[:2]
+    r = min(input_width / w, input_height / h)
+    nw, nh = int(round(w * r)), int(round(h * r))
+    if (nw, nh) != (w, h):
+        interp = cv2.INTER_AREA if r < 1.0 else cv2.INTER_LINEAR
+        resized = cv2.resize(rgb, (nw, nh), interpolation=interp)
+    else:
+        resized = rgb
+    dw, dh = (input_width - nw) / 2.0, (input_height - nh) / 2.0
+    top, bottom = int(round(dh - 0.1)), int(round(dh + 0.1))
+    left, right = int(round(dw - 0.1)), int(round(dw + 0.1))
+    if top or bottom or left or right:
+        resized = cv2.copyMakeBorder(
+            resized, top, bottom, left, right, cv2.BORDER_CONSTANT, value=(PAD_VALUE, PAD_VALUE, PAD_VALUE)
+        )
+    blob = resized.astype(np.float32).transpose(2, 0, 1)[None] * np.float32(1.0 / 255.0)
+    return np.ascontiguousarray(blob), Letterbox(r, float(left), float(top), input_width, input_height)
+
+
+def decode_output(
+    output: NDArray[np.floating],
+    num_classes: int,
+    confidence: float,
+    nms_iou: float,
+    lb: Letterbox,
+    image_width: int,
+    image_height: int,
+    max_det: int = 300,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Decode one YOLO output into boxes in original-image pixels.
+
+    ``output`` is ``(1, 4 + C, N)`` or ``(4 + C, N)`` (``cx, cy, w, h`` in input pixels, then C class
+    scores). Keeps each anchor's best class if its score ≥ ``confidence``, maps the boxes back through
+    the letterbox, clips them to the image and applies class-aware NMS at ``nms_iou``.
+
+    Returns ``(K, 4)`` ``x1, y1, x2, y2``, ``(K,)`` scores and ``(K,)`` class ids, best score first.
+    """
+    out = np.asarray(output)
+    if out.ndim == 3:
+        if out.shape[0] != 1:
+            raise DetectorError(f"expected a batch of one image, got output shape {out.shape}")
+        out = out[0]
+    if out.ndim != 2 or out.shape[0] != 4 + num_classes:
+        raise DetectorError(f"expected a [1, {4 + num_classes}, N] output, got {np.asarray(output).shape}")
+    scores_all = out[4:]
+    cls = np.argmax(scores_all, axis=0)
+    score = scores_all[cls, np.arange(out.shape[1])]
+    keep = np.isfinite(score) & (score >= confidence)
+    if not np.any(keep):
+        return np.zeros((0, 4)), np.zeros(0), np.zeros(0, dtype=np.int64)
+    cx, cy, bw, bh = (out[i, keep].astype(np.float64) for i in range(4))
+    score = score[keep].astype(np.float64)
+    cls = cls[keep].astype(np.int64)
+    x1 = (cx - bw / 2.0 - lb.pad_x) / lb.scale
+    y1 = (cy - bh / 2.0 - lb.pad_y) / lb.scale
+    x2 = (cx + bw / 2.0 - lb.pad_x) / lb.scale
+    y2 = (cy + bh / 2.0 - lb.pad_y) / lb.scale
+    boxes = np.stack(
+        [
+            np.clip(x1, 0.0, image_width),
+            np.clip(y1, 0.0, image_height),
+            np.clip(x2, 0.0, image_width),
+            np.clip(y2, 0.0, image_height),
+        ],
+        axis=1,
+    )
+    finite = np.all(np.isfinite(boxes), axis=1) & (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
+    boxes, score, cls = boxes[finite], score[finite], cls[finite]
+    if len(boxes) == 0:
+        return np.zeros((0, 4)), np.zeros(0), np.zeros(0, dtype=np.int64)
+    xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
+    idx = cv2.dnn.NMSBoxesBatched(
+        xywh, score.astype(np.float32), cls.astype(np.int32), float(confidence), float(nms_iou)
+    )
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+    idx = idx[np.argsort(-score[idx], kind="stable")][:max_det]
+    return boxes[idx], score[idx], cls[idx]
+
+
+def _parse_metadata(meta: dict[str, str]) -> tuple[tuple[str, ...] | None, int | None]:
+    """Class names and training input width from ultralytics' ONNX metadata (``names``, ``imgsz``)."""
+    names: tuple[str, ...] | None = None
+    width: int | None = None
+    try:
+        if "names" in meta:
+            d = ast.literal_eval(meta["names"])
+            if isinstance(d, dict):
+                names = tuple(str(d[k]) for k in sorted(d))
+            elif isinstance(d, (list, tuple)):
+                names = tuple(str(n) for n in d)
+        if "imgsz" in meta:
+            s = ast.literal_eval(meta["imgsz"])
+            width = int(s[-1]) if isinstance(s, (list, tuple)) else int(s)
+    except (ValueError, SyntaxError, TypeError, KeyError):
+        pass
+    return names, width
+
+
+class Detector:
+    """YOLO detector on an onnxruntime CPU session.
+
+    ``cfg.confidence``, ``cfg.nms_iou`` and ``cfg.ignore_classes`` are read on every call (live-tunable);
+    ``cfg.threads`` and ``cfg.input_size`` are read once.
+
+    Raises :class:`DetectorError` (naming the path and the command that makes a model) if the model
+    is missing, corrupt, or not a detector of :data:`CLASS_NAMES`.
+    """
+
+    def __init__(self, cfg: DetectorConfig, model_path: Path | str | None = None) -> None:
+        self.cfg = cfg
+        path = Path(model_path) if model_path is not None else _resolve(cfg.model_path)
+        self.model_path = path
+        if not path.is_file():
+            raise DetectorError(f"detector model not found: {path}. Make one with: {MAKE_MODEL_COMMAND}")
+        import onnxruntime as ort
+
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = int(cfg.threads)
+        opts.inter_op_num_threads = 1
+        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        opts.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(str(path), sess_options=opts, providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises its own exception types for bad protobufs
+            raise DetectorError(
+                f"detector model {path} is corrupt or not an ONNX model ({type(e).__name__}: "
+                f"{str(e).strip().splitlines()[0] if str(e).strip() else ''}). Make one with: {MAKE_MODEL_COMMAND}"
+            ) from None
+        inputs = self.session.get_inputs()
+        if len(inputs) != 1 or len(inputs[0].shape) != 4:
+            raise DetectorError(f"detector model {path} does not take one NCHW image. Make one with: {MAKE_MODEL_COMMAND}")
+        self._input_name = inputs[0].name
+        meta = self.session.get_modelmeta().custom_metadata_map
+        names, trained_width = _parse_metadata(meta)
+        self.class_names: tuple[str, ...] = names if names is not None else CLASS_NAMES
+        if self.class_names != CLASS_NAMES:
+            raise DetectorError(
+                f"detector model {path} has classes {list(self.class_names)}, expected {list(CLASS_NAMES)}. "
+                f"Make one with: {MAKE_MODEL_COMMAND}"
+            )
+        shape = inputs[0].shape
+        h_in, w_in = shape[2], shape[3]
+        #: fixed input (H, W) of a static model, or None for a dynamic one
+        self._static: tuple[int, int] | None = (
+            (int(h_in), int(w_in)) if isinstance(h_in, int) and isinstance(w_in, int) else None
+        )
+        if self._static is not None:
+            self._width = self._static[1]
+        else:
+            self._width = int(cfg.input_size) if cfg.input_size > 0 else int(trained_width or 224)
+            if self._width % STRIDE:
+                raise DetectorError(f"detector.input_size must be a multiple of {STRIDE}, got {self._width}")
+        self.trained_width = trained_width
+        self.num_classes = len(self.class_names)
+        # One dry run: a file that loads but computes the wrong thing fails here, not in the loop.
+        probe_w, probe_h = self.input_size_for(640, 480)
+        try:
+            out = self.session.run(None, {self._input_name: np.zeros((1, 3, probe_h, probe_w), np.float32)})[0]
+        except Exception as e:
+            raise DetectorError(
+                f"detector model {path} failed a test inference ({type(e).__name__}). Make one with: {MAKE_MODEL_COMMAND}"
+            ) from None
+        if out.ndim != 3 or out.shape[1] != 4 + self.num_classes:
+            raise DetectorError(
+                f"detector model {path} outputs {list(out.shape)}, expected [1, {4 + self.num_classes}, N]. "
+                f"Make one with: {MAKE_MODEL_COMMAND}"
+            )
+
+    @property
+    def input_size(self) -> tuple[int, int]:
+        """Network input ``(width, height)`` for the camera's 4:3 images (a static model's fixed size)."""
+        return self.input_size_for(640, 480)
+
+    def input_size_for(self, width: int, height: int) -> tuple[int, int]:
+        """Network input ``(width, height)`` used for an image of ``width × height``."""
+        if self._static is not None:
+            return self._static[1], self._static[0]
+        return input_shape_for(width, height, self._width)
+
+    def infer(self, rgb: NDArray[np.uint8]) -> tuple[NDArray[np.float32], Letterbox]:
+        """Raw network output ``(1, 4 + C, N)`` for an ``(H, W, 3)`` RGB image, and its letterbox."""
+        rgb = _as_rgb(rgb)
+        w_in, h_in = self.input_size_for(rgb.shape[1], rgb.shape[0])
+        blob, lb = letterbox(rgb, w_in, h_in)
+        out = self.session.run(None, {self._input_name: blob})[0]
+        return out, lb
+
+    def detect(self, image: Image) -> Detections:
+        """Boxes in ``image``'s pixels (origin top-left, y down), best first, above ``cfg.confidence``."""
+        rgb = _as_rgb(image.data)
+        out, lb = self.infer(rgb)
+        h, w = rgb.shape[:2]
+        boxes, scores, cls = decode_output(
+            out, self.num_classes, float(self.cfg.confidence), float(self.cfg.nms_iou), lb, w, h
+        )
+        ignore = {CLASS_INDEX[n] for n in self.cfg.ignore_classes if n in CLASS_INDEX}
+        dets = tuple(
+            Detection(float(b[0]), float(b[1]), float(b[2]), float(b[3]), int(c), float(s))
+            for b, s, c in zip(boxes, scores, cls)
+            if int(c) not in ignore
+        )
+        return Detections(stamp=image.stamp, image_width=w, image_height=h, boxes=dets)
+
+
+def _resolve(p: str) -> Path:
+    path = Path(p).expanduser()
+    if path.is_absolute():
+        return path
+    # The project root (the core must not import app.config; this mirrors app.config.resolve_path).
+    if (Path.cwd() / path).exists():
+        return Path.cwd() / path
+    return Path(__file__).resolve().parents[2] / path
+
+
+def _as_rgb(data: NDArray) -> NDArray[np.uint8]:
+    a = np.asarray(data)
+    if a.dtype != np.uint8:
+        raise DetectorError(f"expected a uint8 RGB image, got dtype {a.dtype}")
+    if a.ndim == 2:
+        a = cv2.cvtColor(a, cv2.COLOR_GRAY2RGB)
+    elif a.ndim == 3 and a.shape[2] == 4:
+        a = a[:, :, :3]
+    if a.ndim != 3 or a.shape[2] != 3 or a.shape[0] < 8 or a.shape[1] < 8:
+        raise DetectorError(f"expected an (H, W, 3) RGB image, got shape {a.shape}")
+    return a
+
+
+def draw_detections(rgb: NDArray[np.uint8], detections: Detections, thickness: int | None = None) -> NDArray[np.uint8]:
+    """A copy of ``(H, W, 3)`` RGB ``rgb`` with each box drawn in its class colour, labelled
+    ``"<class> <confidence %>"``. Boxes are rescaled if ``rgb`` is not the detections' image size."""
+    out = np.ascontiguousarray(_as_rgb(rgb).copy())
+    h, w = out.shape[:2]
+    sx = w / detections.image_width if detections.image_width else 1.0
+    sy = h / detections.image_height if detections.image_height else 1.0
+    t = thickness if thickness is not None else max(1, int(round(min(w, h) / 240)))
+    font_scale = max(0.35, min(w, h) / 800)
+    for d in detections.boxes:
+        color = CLASS_COLORS[d.class_id % len(CLASS_COLORS)]
+        p1 = (int(round(d.x1 * sx)), int(round(d.y1 * sy)))
+        p2 = (int(round(d.x2 * sx)), int(round(d.y2 * sy)))
+        cv2.rectangle(out, p1, p2, color, t, cv2.LINE_8)
+        text = f"{d.label} {int(d.confidence * 100)}%"
+        (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, font_scale, 1)
+        ty = p1[1] - 2 if p1[1] - th - base - 2 >= 0 else p1[1] + th + base + 2
+        x0 = min(max(p1[0], 0), max(w - tw - 2, 0))
+        cv2.rectangle(out, (x0, ty - th - base), (x0 + tw + 2, ty + 1), color, -1)
+        luminance = 0.299 * color[0] + 0.587 * color[1] + 0.114 * color[2]
+        text_color = (0, 0, 0) if luminance > 140 else (255, 255, 255)
+        cv2.putText(out, text, (x0 + 1, ty - base + 1), cv2.FONT_HERSHEY_SIMPLEX, font_scale, text_color, 1, cv2.LINE_AA)
+    return out

@@ -1,0 +1,67 @@
+"""Train the YOLO detector from scratch on an `ocslam dataset` and write assets/models/detector.onnx + its card.
+
+Needs the optional [train] extra (pip install -e '.[train]'). Runs fully offline on the CPU; about an
+hour on 2 cores with the defaults (see docs/detector.md):
+
+    ocslam dataset --worlds 40 --per-world 50 --seed 1 --out datasets/sim
+    ocslam train-detector --data datasets/sim --hours 1
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", type=Path, required=True, help="dataset folder (with data.yaml) from `ocslam dataset`")
+    p.add_argument("--model", default="yolov8n.yaml", help="ultralytics model yaml (no pretrained weights): yolov8n.yaml, yolo11n.yaml")
+    p.add_argument("--imgsz", type=int, default=224, help="training image size (paper: 224)")
+    p.add_argument("--epochs", type=int, default=60, help="maximum epochs")
+    p.add_argument("--hours", type=float, default=1.0, help="time budget in hours (fits the epochs to it; 0: off)")
+    p.add_argument("--batch", type=int, default=16)
+    p.add_argument("--patience", type=int, default=15, help="stop after this many epochs without a better val mAP")
+    p.add_argument("--workers", type=int, default=2, help="data loader processes")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--close-mosaic", type=int, default=10, help="last epochs trained without mosaic augmentation")
+    p.add_argument("--no-cache", action="store_true", help="don't cache the decoded images in RAM")
+    p.add_argument("--out", type=Path, default=None, help="ONNX output (default: assets/models/detector.onnx; card beside it)")
+    p.add_argument("--runs", type=Path, default=None, help="ultralytics run folder (default: runs/detector)")
+    p.add_argument("--name", default="train", help="run name inside --runs")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from app.training import TrainingUnavailable, TrainOptions, train_detector
+
+    opts = TrainOptions(
+        data=args.data,
+        model=args.model,
+        imgsz=args.imgsz,
+        epochs=args.epochs,
+        hours=args.hours or None,
+        batch=args.batch,
+        patience=args.patience,
+        workers=args.workers,
+        seed=args.seed,
+        cache=not args.no_cache,
+        close_mosaic=args.close_mosaic,
+        name=args.name,
+    )
+    if args.out is not None:
+        opts.out_model = args.out
+    if args.runs is not None:
+        opts.runs_dir = args.runs
+    try:
+        res = train_detector(opts)
+    except TrainingUnavailable as e:
+        print(f"ocslam train-detector: {e}", file=sys.stderr)
+        return 2
+    v = res.card["validation"]
+    print(
+        f"done: {res.model_path} ({res.card['training']['epochs_run']} epochs, "
+        f"{res.card['training']['training_time_h']:.2f} h); val precision {v['precision']}, recall {v['recall']}, "
+        f"mAP50 {v['map50']}, mAP50-95 {v['map50_95']}"
+    )
+    return 0

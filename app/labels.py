@@ -1,0 +1,189 @@
+"""Detector labels from the simulator's segmentation mask.
+
+A label is the tight box of an object's *visible* pixels (so truncated and partly occluded objects get
+the box a detector must predict). It is kept when enough of the object is visible:
+
+- ``visible_pixels ≥ min_pixels`` (the object covers enough of the image), and
+- ``visible_fraction ≥ min_visible_fraction``, where ``visible_fraction = visible_pixels / full_pixels``
+  and ``full_pixels`` is the object's *unoccluded, untruncated* silhouette area at the same pixel scale
+  (rendered alone on an image plane that extends past the frame, see :func:`silhouette_window`), and
+- the box's shorter side ≥ ``min_box_px``.
+
+Objects that are visible but fail these tests are returned as *ignore* regions: they are not training
+labels (a sliver of a table leg is no "table"), and the benchmark does not count a detection on them as
+a false positive (COCO ``iscrowd``).
+
+Everything here is numpy; nothing imports pybullet.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "LabelFilter",
+    "ObjectLabel",
+    "visible_boxes",
+    "make_labels",
+    "yolo_lines",
+    "silhouette_window",
+    "frustum_matrix",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class LabelFilter:
+    """When a visible object becomes a label (defaults measured to help: see docs/detector.md)."""
+
+    min_pixels: int = 40
+    min_visible_fraction: float = 0.35
+    min_box_px: float = 6.0
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectLabel:
+    """One object's box in an image: pixel edges ``x1 ≤ x < x2``, ``y1 ≤ y < y2`` (origin top-left)."""
+
+    object_id: int
+    class_id: int
+    x1: int
+    y1: int
+    x2: int
+    y2: int
+    visible_pixels: int
+    full_pixels: int
+    keep: bool
+
+    @property
+    def visible_fraction(self) -> float:
+        return self.visible_pixels / self.full_pixels if self.full_pixels > 0 else 1.0
+
+    @property
+    def width(self) -> int:
+        return self.x2 - self.x1
+
+    @property
+    def height(self) -> int:
+        return self.y2 - self.y1
+
+
+def visible_boxes(segmentation: NDArray[np.integer]) -> dict[int, tuple[int, int, int, int, int]]:
+    """``(H, W)`` int mask of object ids (``-1`` or any negative: no object) →
+    ``{id: (x1, y1, x2, y2, pixel_count)}`` with exclusive ``x2, y2``. Vectorised (one sort)."""
+    seg = np.asarray(segmentation)
+    if seg.ndim != 2:
+        raise ValueError(f"expected an (H, W) segmentation mask, got shape {seg.shape}")
+    flat = seg.ravel()
+    idx = np.flatnonzero(flat >= 0)
+    if idx.size == 0:
+        return {}
+    ids = flat[idx]
+    order = np.argsort(ids, kind="stable")
+    ids, idx = ids[order], idx[order]
+    rows, cols = np.divmod(idx, seg.shape[1])
+    uniq, start, counts = np.unique(ids, return_index=True, return_counts=True)
+    x1 = np.minimum.reduceat(cols, start)
+    x2 = np.maximum.reduceat(cols, start) + 1
+    y1 = np.minimum.reduceat(rows, start)
+    y2 = np.maximum.reduceat(rows, start) + 1
+    return {
+        int(u): (int(a), int(b), int(c), int(d), int(n)) for u, a, b, c, d, n in zip(uniq, x1, y1, x2, y2, counts)
+    }
+
+
+def make_labels(
+    segmentation: NDArray[np.integer],
+    class_of: Mapping[int, int],
+    full_pixels: Mapping[int, int],
+    filt: LabelFilter = LabelFilter(),
+) -> list[ObjectLabel]:
+    """Labels (kept or ignore) for every classified object visible in ``segmentation``.
+
+    ``class_of`` maps object id → class index (ids not in it, e.g. walls or distractors, are skipped);
+    ``full_pixels`` maps object id → unoccluded silhouette area (missing: the visible area, i.e. fraction 1).
+    """
+    out = []
+    for oid, (x1, y1, x2, y2, n) in sorted(visible_boxes(segmentation).items()):
+        if oid not in class_of:
+            continue
+        full = max(int(full_pixels.get(oid, n)), n)
+        keep = n >= filt.min_pixels and n / full >= filt.min_visible_fraction and min(x2 - x1, y2 - y1) >= filt.min_box_px
+        out.append(ObjectLabel(oid, int(class_of[oid]), x1, y1, x2, y2, n, full, bool(keep)))
+    return out
+
+
+def yolo_lines(labels: list[ObjectLabel], width: int, height: int) -> list[str]:
+    """YOLO txt rows ``class cx cy w h`` (normalised) of the kept labels."""
+    rows = []
+    for lb in labels:
+        if not lb.keep:
+            continue
+        cx, cy = (lb.x1 + lb.x2) / 2.0 / width, (lb.y1 + lb.y2) / 2.0 / height
+        rows.append(f"{lb.class_id} {cx:.6f} {cy:.6f} {lb.width / width:.6f} {lb.height / height:.6f}")
+    return rows
+
+
+def silhouette_window(
+    points_cam: NDArray[np.float64],
+    K: NDArray[np.float64],
+    width: int,
+    height: int,
+    near: float,
+    margin: float = 1.0,
+) -> tuple[int, int, int, int] | None:
+    """The pixel window ``(u0, v0, u1, v1)`` (exclusive ends) that holds an object's whole silhouette on
+    the camera's image plane *extended past the frame* by ``margin`` frame sizes on every side.
+
+    ``points_cam`` are ``(N, 3)`` points bounding the object (e.g. its AABB corners) in the optical frame
+    (z forward, x right, y down). Points behind the near plane make the projection unbounded on that
+    side; the window is then the extended plane's edge. ``None`` if the object is entirely behind the
+    camera or the window misses the extended plane.
+    """
+    p = np.asarray(points_cam, dtype=np.float64)
+    lo_u, hi_u = -margin * width, (1 + margin) * width
+    lo_v, hi_v = -margin * height, (1 + margin) * height
+    front = p[:, 2] > near
+    if not np.any(front):
+        return None
+    if np.all(front):
+        u = K[0, 0] * p[:, 0] / p[:, 2] + K[0, 2]
+        v = K[1, 1] * p[:, 1] / p[:, 2] + K[1, 2]
+        u0, u1, v0, v1 = u.min(), u.max(), v.min(), v.max()
+    else:  # straddles the camera plane: unbounded; fall back to the whole extended plane
+        u0, u1, v0, v1 = lo_u, hi_u, lo_v, hi_v
+    u0, v0 = max(math.floor(u0), lo_u), max(math.floor(v0), lo_v)
+    u1, v1 = min(math.ceil(u1) + 1, hi_u), min(math.ceil(v1) + 1, hi_v)
+    if u1 <= u0 or v1 <= v0:
+        return None
+    return int(u0), int(v0), int(u1), int(v1)
+
+
+def frustum_matrix(
+    K: NDArray[np.float64], window: tuple[int, int, int, int], near: float, far: float
+) -> list[float]:
+    """OpenGL projection (column-major, 16 floats, for pybullet's ``getCameraImage``) that renders exactly
+    the pixel window ``(u0, v0, u1, v1)`` of the pinhole camera ``K`` at one pixel per image pixel.
+
+    Pixel ``u`` maps to the view-space ray ``x/z = (u - cx)/fx``; the window's edges become glFrustum's
+    ``left/right/bottom/top`` on the near plane (y up in OpenGL, so image rows flip).
+    """
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    u0, v0, u1, v1 = window
+    left = (u0 - cx) / fx * near
+    right = (u1 - cx) / fx * near
+    top = -(v0 - cy) / fy * near
+    bottom = -(v1 - cy) / fy * near
+    m = np.zeros((4, 4))
+    m[0, 0] = 2 * near / (right - left)
+    m[1, 1] = 2 * near / (top - bottom)
+    m[0, 2] = (right + left) / (right - left)
+    m[1, 2] = (top + bottom) / (top - bottom)
+    m[2, 2] = -(far + near) / (far - near)
+    m[2, 3] = -2 * far * near / (far - near)
+    m[3, 2] = -1.0
+    return m.T.ravel().tolist()  # column-major

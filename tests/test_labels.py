@@ -1,0 +1,100 @@
+"""Labels from segmentation masks: tight visible boxes, visibility filtering, off-centre silhouette windows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as p
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from app.labels import LabelFilter, frustum_matrix, make_labels, silhouette_window, visible_boxes, yolo_lines
+
+
+def test_visible_boxes_are_tight() -> None:
+    seg = np.full((20, 30), -1, np.int32)
+    seg[2:5, 3:9] = 7
+    seg[10:19, 20:30] = 2
+    seg[12, 21] = -1  # a hole does not change the box
+    boxes = visible_boxes(seg)
+    assert boxes == {7: (3, 2, 9, 5, 18), 2: (20, 10, 30, 19, 89)}
+    assert visible_boxes(np.full((4, 4), -1)) == {}
+    with pytest.raises(ValueError):
+        visible_boxes(np.zeros((2, 2, 2)))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_visible_boxes_match_a_direct_computation(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    seg = rng.integers(-1, 5, size=(rng.integers(1, 25), rng.integers(1, 25))).astype(np.int32)
+    seg[rng.random(seg.shape) < 0.5] = -1
+    boxes = visible_boxes(seg)
+    assert set(boxes) == set(int(v) for v in np.unique(seg) if v >= 0)
+    for oid, (x1, y1, x2, y2, n) in boxes.items():
+        r, c = np.nonzero(seg == oid)
+        assert (x1, y1, x2, y2, n) == (c.min(), r.min(), c.max() + 1, r.max() + 1, len(r))
+
+
+def test_make_labels_filters_by_pixels_fraction_and_size() -> None:
+    seg = np.full((100, 100), -1, np.int32)
+    seg[10:30, 10:30] = 1  # 400 px, fully visible
+    seg[50:60, 50:90] = 2  # 400 px of a 2000 px object: 20 % visible → ignore region
+    seg[80:82, 0:40] = 3  # 80 px but only 2 px tall → ignore
+    seg[90:95, 90:95] = 4  # 25 px → ignore
+    seg[0:5, 60:70] = 9  # not a classified object (wall, distractor): no label at all
+    labels = make_labels(seg, {1: 0, 2: 3, 3: 5, 4: 6}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.35, min_box_px=4))
+    by = {lb.object_id: lb for lb in labels}
+    assert set(by) == {1, 2, 3, 4}
+    assert by[1].keep and by[1].visible_fraction == 1.0
+    assert not by[2].keep and by[2].visible_fraction == pytest.approx(0.2)
+    assert not by[3].keep and not by[4].keep
+    assert yolo_lines(labels, 100, 100) == ["0 0.200000 0.200000 0.200000 0.200000"]
+    # A looser fraction threshold keeps the occluded object, with its visible box.
+    loose = make_labels(seg, {2: 3}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.1, min_box_px=4))
+    assert loose[0].keep and (loose[0].x1, loose[0].y1, loose[0].x2, loose[0].y2) == (50, 50, 90, 60)
+
+
+def test_silhouette_window_projects_and_extends() -> None:
+    K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    cube = np.array([[x, y, z] for x in (-0.1, 0.1) for y in (-0.1, 0.1) for z in (1.9, 2.1)])
+    u0, v0, u1, v1 = silhouette_window(cube, K, 100, 80, near=0.05)
+    assert (u0, v0) == (44, 34) and (u1, v1) == (57, 47)
+    # Far to the right: still a window, past the frame edge.
+    w = silhouette_window(cube + [1.5, 0, 0], K, 100, 80, near=0.05)
+    assert w is not None and w[0] > 100
+    # Straddling the camera plane: the whole extended plane; behind: None.
+    assert silhouette_window(cube - [0, 0, 2.0], K, 100, 80, near=0.05) == (-100, -80, 200, 160)
+    assert silhouette_window(cube - [0, 0, 5.0], K, 100, 80, near=0.05) is None
+
+
+def test_frustum_matches_pybullet_for_the_full_frame() -> None:
+    W, H, fov_v = 64, 48, 60.0
+    fy = (H / 2) / np.tan(np.radians(fov_v) / 2)
+    K = np.array([[fy, 0, W / 2], [0, fy, H / 2], [0, 0, 1]])
+    ref = p.computeProjectionMatrixFOV(fov_v, W / H, 0.05, 20.0)
+    np.testing.assert_allclose(frustum_matrix(K, (0, 0, W, H), 0.05, 20.0), ref, rtol=1e-5, atol=1e-6)
+
+
+def test_window_render_equals_a_crop_of_the_full_render() -> None:
+    """Rendering a sub-window of the image plane with frustum_matrix gives the same pixels as the crop."""
+    cid = p.connect(p.DIRECT)
+    try:
+        vs = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.2, 0.3, 0.25], physicsClientId=cid)
+        p.createMultiBody(0, -1, vs, basePosition=[2.0, 0.3, 0.2], physicsClientId=cid)
+        W, H = 80, 60
+        fx = (W / 2) / np.tan(0.52)
+        K = np.array([[fx, 0, W / 2], [0, fx, H / 2], [0, 0, 1]])
+        view = p.computeViewMatrix([0, 0, 0.2], [1, 0, 0.2], [0, 0, 1])
+        full = p.getCameraImage(W, H, view, frustum_matrix(K, (0, 0, W, H), 0.05, 20.0),
+                                renderer=p.ER_TINY_RENDERER, physicsClientId=cid)[4]
+        full = np.asarray(full).reshape(H, W)
+        win = (20, 10, 70, 50)
+        part = p.getCameraImage(win[2] - win[0], win[3] - win[1], view, frustum_matrix(K, win, 0.05, 20.0),
+                                renderer=p.ER_TINY_RENDERER, physicsClientId=cid)[4]
+        part = np.asarray(part).reshape(win[3] - win[1], win[2] - win[0])
+        crop = full[win[1]:win[3], win[0]:win[2]]
+        assert (crop == 0).sum() > 100
+        assert np.mean(part == crop) > 0.99
+    finally:
+        p.disconnect(cid)

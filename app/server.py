@@ -1,8 +1,351 @@
-"""The viser web server and the ``ocslam`` CLI entry point."""
+"""The viser web server and the ``ocslam`` CLI entry point.
+
+:class:`OcslamApp` owns one :class:`~app.pipeline.Pipeline` (advanced by a single loop thread at the
+configured speed), a hardened viser server (``app.ui.security``), the scene layers and the panels.
+Every browser tab sees the same world; teleop from any of them drives the one robot.
+
+Example:
+    >>> app = OcslamApp(Config.load(None, ["server.port=0"]))
+    >>> app.start(); print(app.url)
+    >>> app.stop()
+"""
 
 from __future__ import annotations
 
-from typing import Sequence
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from app.config import Config, ConfigError, resolve_path
+
+log = logging.getLogger(__name__)
+
+
+class OcslamApp:
+    """The live app: simulation loop thread + viser server + UI."""
+
+    def __init__(self, cfg: Config, *, pipeline: Any = None) -> None:
+        from app.pipeline import Pipeline
+        from app.ui.panels import Panels
+        from app.ui.scene import SceneLayers
+        from app.ui.security import create_server
+        from app.ui.teleop import Teleop
+
+        self.cfg = cfg
+        self.pipeline = pipeline if pipeline is not None else Pipeline(cfg)
+        self.server, self.origin_policy = create_server(
+            cfg.server.host, cfg.server.port, allow_origins=list(cfg.server.allow_origins), label="OCSLAM"
+        )
+        self.teleop = Teleop(cfg.ui.teleop_linear_mps, cfg.ui.teleop_angular_rps, cfg.ui.teleop_deadman_s)
+        self.pipeline.manual_cmd = self.teleop.command
+        self._lock = threading.RLock()  # guards pipeline replacement (load world)
+        self.paused = False
+        self._step_request = False
+        self.real_time_factor = 0.0
+        self.ticks = 0
+        self.layers = SceneLayers(self.server, self.pipeline)
+        self.panels = Panels(self)
+        self._install_scene_click()
+        self._set_initial_camera()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="ocslam-loop", daemon=True)
+        self.loop_error: str | None = None
+        self.server.on_client_connect(self._on_connect)
+
+    # ------------------------------------------------------------------------------------------
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        host = self.cfg.server.host
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+        return f"http://{shown}:{self.port}"
+
+    def start(self) -> "OcslamApp":
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=10)
+        try:
+            self.server.stop()
+        finally:
+            self.pipeline.close()
+
+    # ------------------------------------------------------------------------------------------
+    # the loop thread
+    # ------------------------------------------------------------------------------------------
+    def _loop(self) -> None:
+        wall0, sim0 = time.perf_counter(), self.pipeline.time
+        next_ui = next_map = 0.0
+        rtf_wall, rtf_sim = wall0, sim0
+        while not self._stop.is_set():
+            try:
+                now = time.perf_counter()
+                p = self.pipeline
+                self._apply_ui_settings()
+                if self.paused and not self._step_request:
+                    p.drain_commands()
+                    wall0, sim0 = now, p.time
+                else:
+                    if self._step_request:
+                        self._step_request = False
+                        target = p.time + 1.0 / self.cfg.lidar.rate_hz
+                        while p.time < target - 1e-9:
+                            p.step()
+                        wall0, sim0 = now, p.time
+                    else:
+                        due = sim0 + (now - wall0) * self.cfg.sim.speed
+                        budget = now + 0.05  # keep the UI responsive even when the sim cannot keep up
+                        while p.time < due and time.perf_counter() < budget:
+                            p.step()
+                        if due - p.time > 0.5:  # behind: don't try to catch up forever
+                            wall0, sim0 = time.perf_counter(), p.time
+                if now - rtf_wall >= 1.0:
+                    self.real_time_factor = (p.time - rtf_sim) / (now - rtf_wall)
+                    rtf_wall, rtf_sim = now, p.time
+                if now >= next_ui:
+                    with_map = now >= next_map
+                    t0 = time.perf_counter()
+                    self._update_ui(with_map)
+                    p.timer.add("ui", time.perf_counter() - t0)
+                    next_ui = now + 1.0 / self.cfg.ui.update_hz
+                    if with_map:
+                        next_map = now + 1.0 / self.cfg.ui.map_hz
+                    self.ticks += 1
+                # sleep until the next physics step is due (or a short while when paused)
+                dt = self.cfg.sim.physics_dt_s / max(self.cfg.sim.speed, 1e-3)
+                time.sleep(0.02 if self.paused else max(0.0, min(dt, next_ui - time.perf_counter())))
+            except Exception as e:  # never let one bad tick kill the app
+                log.exception("loop error")
+                self.loop_error = str(e)
+                self.pipeline.counters.error("loop")
+                time.sleep(0.1)
+
+    def _apply_ui_settings(self) -> None:
+        ui = self.cfg.ui
+        self.teleop.linear_mps = ui.teleop_linear_mps
+        self.teleop.angular_rps = ui.teleop_angular_rps
+        self.teleop.deadman_s = ui.teleop_deadman_s
+
+    def _update_ui(self, with_map: bool) -> None:
+        with self.server.atomic():
+            self.layers.update(with_map=with_map)
+            self.panels.update()
+        if self.panels.follow_robot:
+            T = self.pipeline.T_map_base
+            for c in self.server.get_clients().values():
+                try:
+                    off = np.asarray(c.camera.position) - np.asarray(c.camera.look_at)
+                    c.camera.look_at = (T.x, T.y, 0.0)
+                    c.camera.position = (T.x + off[0], T.y + off[1], off[2])
+                except Exception:
+                    pass
+
+    # ------------------------------------------------------------------------------------------
+    # commands (called from viser's thread pool)
+    # ------------------------------------------------------------------------------------------
+    def notify(self, client: Any, title: str, body: str, color: str = "blue") -> None:
+        from app.ui.panels import _notify
+
+        _notify(client, self.server, title, body, color)
+
+    def submit(self, fn: Callable[[Any], Any], *, client: Any = None) -> None:
+        """Run ``fn(pipeline)`` in the loop thread; report failures to the client."""
+
+        def run(p: Any) -> None:
+            try:
+                fn(p)
+            except Exception as e:
+                self.notify(client, "Command failed", str(e), "red")
+
+        self.pipeline.submit(run)
+
+    def toggle_pause(self) -> None:
+        self.paused = not self.paused
+
+    def single_step(self) -> None:
+        self.paused = True
+        self._step_request = True
+
+    def set_config(self, path: str, value: Any, *, client: Any = None) -> None:
+        def apply(p: Any) -> None:
+            try:
+                self.cfg.set(path, value)
+            except ConfigError as e:
+                self.notify(client, "Value refused", str(e), "red")
+
+        self.pipeline.submit(apply)
+
+    def save_config(self, path: str, *, client: Any = None) -> None:
+        try:
+            out = self.cfg.save(resolve_out(path))
+            self.notify(client, "Config saved", f"{out} — run it with `ocslam run --config {out}`", "green")
+        except Exception as e:
+            self.notify(client, "Save failed", str(e), "red")
+
+    def reset_config(self, *, client: Any = None) -> None:
+        def apply(p: Any) -> None:
+            defaults = Config()
+            for path, f, _ in defaults.iter_fields():
+                if f.metadata.get("live"):
+                    self.cfg.set(path, defaults.get(path))
+            self.panels.sync_config_handles()
+            self.notify(client, "Config reset", "Live settings restored to their defaults.", "green")
+
+        self.pipeline.submit(apply)
+
+    def reset_world(self) -> None:
+        self.pipeline.submit(lambda p: p.reset())
+
+    def load_world(self, path: str, *, client: Any = None) -> None:
+        """Replace the pipeline with one on another world (runs in the loop thread)."""
+
+        def apply(p: Any) -> None:
+            from app.pipeline import Pipeline
+            from app.worlds import load_world
+
+            try:
+                world = load_world(resolve_path(path))
+            except Exception as e:
+                self.notify(client, "World not loaded", str(e), "red")
+                return
+            self.cfg.sim.world = path
+            old = self.pipeline
+            new = Pipeline(self.cfg, world=world)
+            new.manual_cmd = self.teleop.command
+            self.pipeline = new
+            self.layers.pipeline = new
+            self.layers.rebuild_world()
+            old.close()
+            routes = tuple(world.routes) or ("(none)",)
+            self.panels.route_choice.options = routes
+            self.panels.route_choice.value = routes[0]
+            self.notify(client, "World loaded", f"{world.name}: {len(world.objects)} objects", "green")
+
+        self.pipeline.submit(apply)
+
+    def export_map(self, path: str, *, client: Any = None) -> None:
+        def apply(p: Any) -> None:
+            from app.ocslam.mapio import save_map
+
+            out = save_map(p.slam.occupancy_grid(), resolve_out(path))
+            self.notify(client, "Map exported", f"{out} (map_server YAML + PGM)", "green")
+
+        self.submit(apply, client=client)
+
+    def save_session(self, path: str, *, client: Any = None) -> None:
+        def apply(p: Any) -> None:
+            from app.session import save_session
+
+            out = save_session(p, resolve_out(path), server=self.server)
+            self.panels.session_status.content = f"saved to `{out}` at sim {p.time:.1f} s"
+            self.notify(client, "Session saved", str(out), "green")
+
+        self.submit(apply, client=client)
+
+    def load_session(self, path: str, *, client: Any = None) -> None:
+        def apply(p: Any) -> None:
+            from app.session import load_session
+
+            load_session(p, resolve_path(path))
+            self.layers._grid_stamp = -1.0
+            self.panels.session_status.content = f"loaded `{path}`"
+            self.notify(client, "Session loaded", f"map, objects and pose graph restored from {path}", "green")
+
+        self.submit(apply, client=client)
+
+    # ------------------------------------------------------------------------------------------
+    # views
+    # ------------------------------------------------------------------------------------------
+    def _clients(self, client: Any) -> list[Any]:
+        return [client] if client is not None else list(self.server.get_clients().values())
+
+    def _world_center(self) -> tuple[np.ndarray, float]:
+        grid = self.pipeline.slam.occupancy_grid()
+        if grid.width > 2:
+            w, h = grid.width * grid.resolution, grid.height * grid.resolution
+            c = grid.origin.transform_points(np.array([[w / 2, h / 2]]))[0]
+            return c, max(w, h)
+        T = self.pipeline.T_map_base
+        return np.array([T.x, T.y]), 8.0
+
+    def top_down_view(self, client: Any = None) -> None:
+        c, size = self._world_center()
+        for cl in self._clients(client):
+            if hasattr(cl.camera, "up_direction"):
+                cl.camera.up_direction = (0.0, 1.0, 0.0)
+            cl.camera.look_at = (float(c[0]), float(c[1]), 0.0)
+            cl.camera.position = (float(c[0]), float(c[1]) - 0.01, float(max(size, 4.0) * 1.1))
+
+    def focus_object(self, object_id: int, client: Any = None) -> None:
+        for o in self.pipeline.consciousness.objects:
+            if o.id == object_id:
+                T = self.layers._object_pose_map(o)
+                for cl in self._clients(client):
+                    cl.camera.look_at = (T.x, T.y, 0.2)
+                    cl.camera.position = (T.x - 1.2, T.y - 1.2, 1.4)
+                return
+
+    def _set_initial_camera(self) -> None:
+        T = self.pipeline.T_map_base
+        ic = self.server.initial_camera
+        ic.look_at = (T.x + 1.5, T.y, 0.0)
+        ic.position = (T.x - 2.5, T.y - 2.5, 3.5)
+        ic.up = (0.0, 0.0, 1.0)
+
+    def _on_connect(self, client: Any) -> None:
+        log.info("client %s connected", client.client_id)
+
+    def _install_scene_click(self) -> None:
+        """Click-to-go: a click on the floor (z = 0 in the map frame) plans and follows an A* path."""
+
+        @self.server.scene.on_click()
+        def _(event: Any) -> None:
+            o = np.asarray(event.ray_origin, dtype=float)
+            d = np.asarray(event.ray_direction, dtype=float)
+            if abs(d[2]) < 1e-6:
+                return
+            s = -o[2] / d[2]
+            if s <= 0:
+                return
+            x, y = (o + s * d)[:2]
+            self.teleop.stop()
+            self.submit(lambda p: p.go_to((float(x), float(y))) or self.notify(
+                event.client, "No path", f"no path to ({x:.2f}, {y:.2f}) on the SLAM grid", "orange"), client=event.client)
+
+
+def resolve_out(path: str | Path) -> Path:
+    p = Path(path).expanduser()
+    return p if p.is_absolute() else Path.cwd() / p
+
+
+def serve(cfg: Config) -> int:
+    """``ocslam run``: start the web app and block until Ctrl-C."""
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    app = OcslamApp(cfg).start()
+    exposed = cfg.server.host not in ("127.0.0.1", "localhost", "::1")
+    print(f"OCSLAM is running: open {app.url} in your browser (Ctrl-C stops)", flush=True)
+    if exposed:
+        print(f"WARNING: listening on {cfg.server.host}: anyone who can reach this machine can drive the robot.",
+              flush=True)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        print("stopping…", flush=True)
+    finally:
+        app.stop()
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,630 @@
+"""The loop: one thread owns pybullet and advances the simulator and the algorithm core.
+
+Data flow (the paper's Figure 1)::
+
+    wheel encoders ─► odometry ─► T_odom_base ──────────────┐
+    LIDAR ─────────────────────► LaserScan ───────────────► SLAM ─► T_map_odom, grid, graph
+    camera ────────────────────► Image ─► detector ─► Detections
+              scan + pose at the image stamp + detections ─► consciousness ─► object map
+    ground truth ─────────────────────────────────────────► evaluation (never into the above)
+
+The web server and the headless runner both drive a :class:`Pipeline`. GUI callbacks never touch it
+directly: they :meth:`Pipeline.submit` a function that the loop runs between steps.
+
+Frames: the simulator's ``world`` frame is only known to the simulator and the evaluation. ``odom`` starts
+at the robot's start pose and ``map`` starts equal to ``odom`` (as slam_toolbox does), so ground truth is
+compared in ``map`` through ``T_map_world = T_world_start⁻¹`` (the world file's declared start pose, the
+same initial-pose knowledge AMCL or slam_toolbox is given).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from app.config import Config, resolve_path
+from app.ocslam.messages import (
+    Detections,
+    GroundTruthObject,
+    GroundTruthObstacle,
+    Image,
+    LaserScan,
+    Twist,
+)
+from app.ocslam.odometry import DiffDriveOdometry
+from app.ocslam.se2 import Pose2
+from app.ocslam.sync import PoseBuffer, ScanBuffer, reproject_scan
+
+log = logging.getLogger(__name__)
+
+STAGES = ("physics", "lidar", "render", "detector", "slam", "consciousness", "ui")
+
+
+class StageTimer:
+    """Per-stage wall-clock accounting: totals (for benchmarks) and a smoothed recent value (for the UI)."""
+
+    def __init__(self, stages: tuple[str, ...] = STAGES) -> None:
+        self.total_s = {s: 0.0 for s in stages}
+        self.calls = {s: 0 for s in stages}
+        self.recent_ms = {s: 0.0 for s in stages}
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.total_s[stage] = self.total_s.get(stage, 0.0) + seconds
+        self.calls[stage] = self.calls.get(stage, 0) + 1
+        prev = self.recent_ms.get(stage, 0.0)
+        self.recent_ms[stage] = 0.9 * prev + 0.1 * seconds * 1e3 if prev else seconds * 1e3
+
+    def time(self, stage: str):
+        timer = self
+
+        class _Ctx:
+            def __enter__(self_inner):
+                self_inner.t0 = time.perf_counter()
+
+            def __exit__(self_inner, *exc):
+                timer.add(stage, time.perf_counter() - self_inner.t0)
+                return False
+
+        return _Ctx()
+
+    def per_call_ms(self) -> dict[str, float]:
+        return {s: (1e3 * self.total_s[s] / self.calls[s]) if self.calls.get(s) else 0.0 for s in self.total_s}
+
+    def per_sim_second_ms(self, sim_seconds: float) -> dict[str, float]:
+        if sim_seconds <= 0:
+            return {s: 0.0 for s in self.total_s}
+        return {s: 1e3 * v / sim_seconds for s, v in self.total_s.items()}
+
+
+@dataclass
+class FusionSnapshot:
+    """What the last camera frame produced, for the UI and tests."""
+
+    stamp: float = -1.0
+    image: Image | None = None
+    detections: Detections | None = None
+    report: Any = None  # consciousness.FrameReport
+    T_frame_base: Pose2 | None = None  # robot pose used for the fusion, in the objects' frame
+    synced_scan_dt: float = 0.0  # |image stamp − scan stamp| used
+
+
+@dataclass
+class Counters:
+    scans: int = 0
+    images: int = 0
+    detections: int = 0
+    fused_frames: int = 0
+    skipped_frames: dict[str, int] = field(default_factory=dict)
+    errors: dict[str, int] = field(default_factory=dict)
+
+    def skip(self, reason: str) -> None:
+        self.skipped_frames[reason] = self.skipped_frames.get(reason, 0) + 1
+
+    def error(self, reason: str) -> None:
+        self.errors[reason] = self.errors.get(reason, 0) + 1
+
+
+def make_detector(cfg: Config):
+    """The configured detector: the YOLO model, the simulator oracle, or none."""
+    kind = cfg.detector.kind
+    if kind == "none":
+        return None
+    if kind == "oracle":
+        from app.oracle import OracleDetector
+
+        return OracleDetector(cfg.detector, np.random.default_rng(cfg.sim.seed + 7))
+    from app.ocslam.detector import Detector
+
+    return Detector(cfg.detector, resolve_path(cfg.detector.model_path))
+
+
+class Pipeline:
+    """Simulator + odometry + SLAM + detector + consciousness, advanced one physics step at a time."""
+
+    def __init__(self, cfg: Config, *, world: Any = None, detector: Any = "auto") -> None:
+        from app.ocslam.consciousness import Consciousness
+        from app.ocslam.projection import CameraModel
+        from app.ocslam.slam import Slam
+        from app.robot_model import RobotModel
+        from app.sim_world import SimWorld
+        from app.worlds import load_world
+
+        self.cfg = cfg
+        self.world = world if world is not None else load_world(resolve_path(cfg.sim.world))
+        self.robot_model = RobotModel.load()
+        self.sim = SimWorld(self.world, cfg, seed=cfg.sim.seed)
+        self.T_world_start: Pose2 = self.sim.true_pose()
+        self.T_map_world: Pose2 = self.T_world_start.inverse()
+        self.T_base_scan: Pose2 = self.robot_model.T_base_scan_2d()
+        self.odometry = DiffDriveOdometry(cfg.robot)
+        self.slam = Slam(cfg.slam, T_base_scan=self.T_base_scan)
+        self.detector_error: str | None = None
+        if detector == "auto":
+            try:
+                detector = make_detector(cfg)
+            except Exception as e:  # a missing model must not stop the simulation or the map
+                self.detector_error = str(e)
+                log.error("detector disabled: %s", e)
+                detector = None
+        self.detector = detector
+        cam_w, cam_h = self.camera_render_size()
+        self.camera_model = CameraModel(
+            info=self.sim.camera_info(cam_w, cam_h),
+            T_base_optical=self.robot_model.T_base_camera_optical,
+            T_base_scan=self.robot_model.T_base_scan,
+        )
+        self.consciousness = Consciousness(cfg.consciousness, self.camera_model)
+
+        self.timer = StageTimer()
+        self.counters = Counters()
+        self.commands: queue.Queue[Callable[[Pipeline], Any]] = queue.Queue()
+        self.odom_poses = PoseBuffer(maxlen=4000)
+        self.scans = ScanBuffer(maxlen=10)
+        self.last_scan: LaserScan | None = None
+        self.fusion = FusionSnapshot()
+        self._last_fusion_pose: Pose2 | None = None
+        self._slam_corrections = 0
+
+        # sensor schedule (sim time)
+        self._next_odom = 0.0
+        self._next_scan = 0.0
+        # the camera is not triggered with the LIDAR: half a scan period later, as unsynchronised
+        # real sensors are; improved mode synchronises them, seed mode does not.
+        self._next_image = 0.5 / cfg.lidar.rate_hz
+
+        # control
+        self.cmd = Twist()
+        self.manual_cmd: Callable[[], Twist] | None = None  # teleop (set by the server)
+        self.drive_mode = "idle"  # idle | teleop | route | goto | explore
+        self.nav_status = ""
+        self._follower = None
+        self._route = None
+        self._explorer = None
+        self._nav_path_map: np.ndarray | None = None
+        self.paused = False
+
+        # ground truth logs (evaluation only)
+        self.truth_log: list[tuple[float, Pose2, Pose2]] = []  # (stamp, T_map_base true, T_odom_base)
+        self._true_distance = 0.0
+        self._last_true: Pose2 | None = None
+        self.coverage_log: list[tuple[float, float]] = []
+        self._true_free_area: float | None = None
+        self.wall_start = time.perf_counter()
+        self.wall_time_s = 0.0
+
+        self._on_reset()
+
+    # ---------------------------------------------------------------------------------------------
+    # setup helpers
+    # ---------------------------------------------------------------------------------------------
+    def camera_render_size(self) -> tuple[int, int]:
+        c = self.cfg.camera
+        if c.render_width and c.render_width < c.width:
+            w = int(c.render_width)
+            return w, max(1, int(round(c.height * w / c.width)))
+        return int(c.width), int(c.height)
+
+    def _on_reset(self) -> None:
+        enc = self.sim.read_encoders()
+        self.odometry.reset()
+        self.odometry.update(enc)
+        self.odom_poses.clear()
+        self.odom_poses.add(self.sim.time, self.odometry.T_odom_base)
+
+    @property
+    def time(self) -> float:
+        return self.sim.time
+
+    # ---------------------------------------------------------------------------------------------
+    # commands from other threads
+    # ---------------------------------------------------------------------------------------------
+    def submit(self, fn: Callable[["Pipeline"], Any]) -> None:
+        """Run ``fn(pipeline)`` in the loop thread before the next step (thread-safe)."""
+        self.commands.put(fn)
+
+    def drain_commands(self) -> int:
+        n = 0
+        while True:
+            try:
+                fn = self.commands.get_nowait()
+            except queue.Empty:
+                return n
+            try:
+                fn(self)
+            except Exception:  # a bad command must not kill the loop
+                log.exception("command failed")
+                self.counters.error("command")
+            n += 1
+
+    # ---------------------------------------------------------------------------------------------
+    # frames
+    # ---------------------------------------------------------------------------------------------
+    @property
+    def T_odom_base(self) -> Pose2:
+        return self.odometry.T_odom_base
+
+    @property
+    def T_map_odom(self) -> Pose2:
+        return self.slam.T_map_odom if self.cfg.slam.enabled else Pose2()
+
+    @property
+    def T_map_base(self) -> Pose2:
+        return self.T_map_odom @ self.odometry.T_odom_base
+
+    def true_pose_map(self) -> Pose2:
+        """Ground truth robot pose in the map frame (evaluation / overlay only)."""
+        return self.T_map_world @ self.sim.true_pose()
+
+    def truth_objects_map(self) -> list[GroundTruthObject]:
+        """Ground-truth objects re-expressed in the map frame (evaluation / overlay only)."""
+        from dataclasses import replace
+
+        T = self.T_map_world
+        out = []
+        for o in self.sim.ground_truth_objects():
+            out.append(
+                replace(o, pose=T @ o.pose, footprint=T.transform_points(o.footprint), frame_id="map")
+            )
+        return out
+
+    def truth_obstacles_map(self) -> list[GroundTruthObstacle]:
+        from dataclasses import replace
+
+        T = self.T_map_world
+        return [
+            replace(o, footprint=T.transform_points(o.footprint), frame_id="map")
+            for o in self.sim.ground_truth_obstacles()
+        ]
+
+    # ---------------------------------------------------------------------------------------------
+    # driving
+    # ---------------------------------------------------------------------------------------------
+    def _navigation(self):
+        from app.ocslam import navigation
+
+        return navigation
+
+    def stop_autonomy(self, status: str = "") -> None:
+        self.drive_mode = "idle"
+        self._route = None
+        self._explorer = None
+        self._nav_path_map = None
+        if self._follower is not None:
+            self._follower.clear()
+        self.nav_status = status
+
+    def follow_route(self, name: str) -> None:
+        """Follow a named route of the world file (waypoints converted to the map frame)."""
+        nav = self._navigation()
+        if name not in self.world.routes:
+            raise KeyError(f"world has no route {name!r} (routes: {', '.join(self.world.routes) or 'none'})")
+        pts_world = np.asarray(self.world.routes[name], dtype=float).reshape(-1, 2)
+        pts_map = self.T_map_world.transform_points(pts_world)
+        self._route = nav.RouteFollower(self.cfg.robot, pts_map)
+        self._nav_path_map = pts_map
+        self.drive_mode = "route"
+        self.nav_status = f"route {name}: {len(pts_map)} waypoints"
+
+    def go_to(self, goal_map_xy: tuple[float, float]) -> bool:
+        """Plan an A* path on the SLAM grid to ``goal_map_xy`` and follow it."""
+        nav = self._navigation()
+        grid = self.slam.occupancy_grid()
+        start = self.T_map_base
+        path = nav.plan_path(grid, (start.x, start.y), goal_map_xy, self.cfg.robot.footprint_radius_m + 0.03)
+        if path is None:
+            self.stop_autonomy(f"no path to ({goal_map_xy[0]:.2f}, {goal_map_xy[1]:.2f})")
+            return False
+        self._ensure_follower().set_path(path)
+        self._nav_path_map = path
+        self.drive_mode = "goto"
+        self.nav_status = f"going to ({goal_map_xy[0]:.2f}, {goal_map_xy[1]:.2f})"
+        return True
+
+    def explore(self) -> None:
+        nav = self._navigation()
+        self._explorer = nav.FrontierExplorer(self.cfg.robot.footprint_radius_m + 0.03)
+        self._ensure_follower().clear()
+        self._nav_path_map = None
+        self.drive_mode = "explore"
+        self.nav_status = "exploring"
+
+    def _ensure_follower(self):
+        if self._follower is None:
+            self._follower = self._navigation().PathFollower(self.cfg.robot)
+        return self._follower
+
+    def _control(self) -> Twist:
+        manual = self.manual_cmd() if self.manual_cmd is not None else Twist()
+        if manual.linear_x or manual.angular_z:
+            if self.drive_mode not in ("idle", "teleop"):
+                self.stop_autonomy("teleop took over")
+            self.drive_mode = "teleop"
+            return manual
+        if self.drive_mode == "teleop":
+            self.drive_mode = "idle"
+        scan = self.last_scan
+        if self.drive_mode == "route" and self._route is not None:
+            twist = self._route.compute(self.T_map_base, scan, self.T_base_scan)
+            if self._route.done:
+                self.stop_autonomy("route done")
+                return Twist()
+            return twist
+        if self.drive_mode == "goto" and self._follower is not None:
+            twist = self._follower.compute(self.T_map_base, scan, self.T_base_scan)
+            if self._follower.status in ("arrived",):
+                self.stop_autonomy("arrived")
+                return Twist()
+            return twist
+        if self.drive_mode == "explore" and self._explorer is not None:
+            return self._explore_step(scan)
+        return Twist()
+
+    def _explore_step(self, scan: LaserScan | None) -> Twist:
+        follower = self._ensure_follower()
+        if follower.status in ("idle", "arrived", "blocked") and self.time >= getattr(self, "_explore_next_plan", 0.0):
+            if follower.status == "blocked" and self._nav_path_map is not None and len(self._nav_path_map):
+                self._explorer.mark_failed(self._nav_path_map[-1])
+            grid = self.slam.occupancy_grid()
+            nxt = self._explorer.next_goal(grid, self.T_map_base)
+            if nxt is None:
+                self.stop_autonomy("exploration done: no reachable frontier left")
+                self.exploration_done_time = self.time
+                return Twist()
+            goal, path = nxt
+            follower.set_path(path)
+            self._nav_path_map = path
+            self._explore_next_plan = self.time + 0.5
+        twist = follower.compute(self.T_map_base, scan, self.T_base_scan)
+        return twist
+
+    # ---------------------------------------------------------------------------------------------
+    # the step
+    # ---------------------------------------------------------------------------------------------
+    def step(self) -> None:
+        """Advance one physics step and run whatever sensors are due."""
+        self.drain_commands()
+        if self.paused:
+            return
+        self.cmd = self._control()
+        with self.timer.time("physics"):
+            self.sim.set_cmd_vel(self.cmd)
+            self.sim.step()
+        t = self.sim.time
+        if t + 1e-9 >= self._next_odom:
+            self._next_odom += 1.0 / self.cfg.encoders.rate_hz
+            self._odometry_update()
+        if t + 1e-9 >= self._next_scan:
+            self._next_scan += 1.0 / self.cfg.lidar.rate_hz
+            self._odometry_update()
+            self._scan_update()
+        if t + 1e-9 >= self._next_image:
+            self._next_image += 1.0 / self.cfg.camera.rate_hz
+            if self.detector is not None:
+                self._odometry_update()
+                self._camera_update()
+
+    def _odometry_update(self) -> None:
+        msg = self.odometry.update(self.sim.read_encoders())
+        self.odom_poses.add(msg.stamp, msg.T_odom_base)
+
+    def _scan_update(self) -> None:
+        with self.timer.time("lidar"):
+            scan = self.sim.scan()
+        self.counters.scans += 1
+        self.scans.add(scan)
+        self.last_scan = scan
+        stamp = scan.stamp
+        T_odom_base = self.odom_poses.at(stamp)
+        if self.cfg.slam.enabled:
+            with self.timer.time("slam"):
+                try:
+                    self.slam.process(scan, T_odom_base)
+                except Exception:
+                    log.exception("SLAM failed on a scan; skipped")
+                    self.counters.error("slam")
+            if self.slam.correction_count != self._slam_corrections:
+                self._slam_corrections = self.slam.correction_count
+                if self.cfg.consciousness.mode == "improved":
+                    with self.timer.time("consciousness"):
+                        self.consciousness.apply_correction(self.slam.keyframe_pose)
+        # ground truth bookkeeping (evaluation only)
+        true_map = self.true_pose_map()
+        self.truth_log.append((stamp, true_map, T_odom_base))
+        if self._last_true is not None:
+            self._true_distance += true_map.distance(self._last_true)
+        self._last_true = true_map
+
+    def _camera_update(self) -> None:
+        w, h = self.camera_render_size()
+        oracle = self.cfg.detector.kind == "oracle"
+        with self.timer.time("render"):
+            frame = self.sim.render_camera(w, h, segmentation=oracle)
+        self.counters.images += 1
+        with self.timer.time("detector"):
+            try:
+                if oracle:
+                    dets = self.detector.detect(frame, self.sim.ground_truth_objects())
+                else:
+                    dets = self.detector.detect(frame.image)
+            except Exception:
+                log.exception("detector failed on a frame; skipped")
+                self.counters.error("detector")
+                return
+        self.counters.detections += len(dets)
+        self.fusion.image = frame.image
+        self.fusion.detections = dets
+        with self.timer.time("consciousness"):
+            self._fuse(dets)
+
+    def _fuse(self, dets: Detections) -> None:
+        c = self.cfg.consciousness
+        stamp = dets.stamp
+        if c.mode == "seed":
+            # the original: the latest scan and the latest raw odometry pose, in the odom frame;
+            # frames count only when the pose changed since the previous message
+            scan = self.scans.latest()
+            if scan is None:
+                self.counters.skip("no_scan")
+                return
+            T = self.odometry.T_odom_base
+            moved = self._last_fusion_pose is None or T != self._last_fusion_pose
+            self._last_fusion_pose = T
+            report = self.consciousness.update(dets, scan, T, stamp=stamp, robot_moved=moved)
+            self.fusion.synced_scan_dt = abs(stamp - scan.stamp)
+        else:
+            scan = self.scans.nearest(stamp, c.sync_tolerance_s)
+            if scan is None:
+                self.counters.skip("no_synced_scan")
+                return
+            T_odom_img = self.odom_poses.at(stamp)
+            T_odom_scan = self.odom_poses.at(scan.stamp)
+            if scan.stamp != stamp:
+                scan = reproject_scan(scan, self.T_base_scan, T_odom_img.between(T_odom_scan), stamp)
+            T = self.T_map_odom @ T_odom_img
+            kf = None
+            if self.cfg.slam.enabled:
+                k = self.slam.keyframe_at(stamp)
+                if k is not None:
+                    kf = (k, self.slam.keyframe_pose(k))
+            grid = self.slam.occupancy_grid() if (self.cfg.slam.enabled and c.corner_check) else None
+            moved = self._last_fusion_pose is None or T.distance(self._last_fusion_pose) > 1e-4 or abs(
+                T.yaw - self._last_fusion_pose.yaw
+            ) > 1e-4
+            self._last_fusion_pose = T
+            report = self.consciousness.update(dets, scan, T, stamp=stamp, grid=grid, keyframe=kf, robot_moved=moved)
+            self.fusion.synced_scan_dt = 0.0
+        self.counters.fused_frames += 1
+        self.fusion.stamp = stamp
+        self.fusion.report = report
+        self.fusion.T_frame_base = T
+
+    # ---------------------------------------------------------------------------------------------
+    # running
+    # ---------------------------------------------------------------------------------------------
+    def run_for(self, sim_seconds: float, *, stop: Callable[[], bool] | None = None) -> None:
+        end = self.sim.time + sim_seconds
+        while self.sim.time < end - 1e-9:
+            if stop is not None and stop():
+                break
+            self.step()
+
+    def reset(self) -> None:
+        """Reset the world and every estimator (the map is lost: save a session first)."""
+        from app.ocslam.consciousness import Consciousness
+        from app.ocslam.slam import Slam
+
+        self.sim.reset()
+        self.slam = Slam(self.cfg.slam, T_base_scan=self.T_base_scan)
+        self.consciousness = Consciousness(self.cfg.consciousness, self.camera_model)
+        self.scans.clear()
+        self.last_scan = None
+        self.fusion = FusionSnapshot()
+        self._last_fusion_pose = None
+        self._slam_corrections = 0
+        self.truth_log.clear()
+        self._true_distance = 0.0
+        self._last_true = None
+        self.stop_autonomy("reset")
+        t = self.sim.time
+        self._next_odom = t
+        self._next_scan = t
+        self._next_image = t + 0.5 / self.cfg.lidar.rate_hz
+        self._on_reset()
+
+    # ---------------------------------------------------------------------------------------------
+    # metrics
+    # ---------------------------------------------------------------------------------------------
+    def odometry_errors(self) -> dict[str, float]:
+        """Raw odometry against ground truth (odom frame = map frame at start)."""
+        if not self.truth_log:
+            return {"odom_final_error_m": 0.0, "odom_rms_error_m": 0.0, "odom_final_heading_error_deg": 0.0}
+        true = np.array([p.as_array() for _, p, _ in self.truth_log])
+        odom = np.array([o.as_array() for _, _, o in self.truth_log])
+        err = np.hypot(*(true[:, :2] - odom[:, :2]).T)
+        dyaw = math.degrees(abs(math.remainder(true[-1, 2] - odom[-1, 2], 2 * math.pi)))
+        return {
+            "odom_final_error_m": float(err[-1]),
+            "odom_rms_error_m": float(np.sqrt(np.mean(err**2))),
+            "odom_final_heading_error_deg": float(dyaw),
+        }
+
+    def slam_metrics(self) -> dict[str, float]:
+        from app.ocslam.slam import metrics
+
+        out: dict[str, float] = {}
+        if not (self.cfg.slam.enabled and self.truth_log):
+            return out
+        stamps, est = self.slam.trajectory()
+        if len(stamps):
+            truth_stamps = np.array([s for s, _, _ in self.truth_log])
+            true = np.array([p.as_array() for _, p, _ in self.truth_log])
+            idx = np.clip(np.searchsorted(truth_stamps, stamps), 0, len(truth_stamps) - 1)
+            ok = np.abs(truth_stamps[idx] - stamps) < 1e-6
+            if ok.any():
+                out["slam_ate_rmse_m"] = float(metrics.ate_rmse(est[ok], true[idx[ok]]))
+        grid = self.slam.occupancy_grid()
+        polys = [o.footprint for o in self.truth_obstacles_map()]
+        lidar_z = self.robot_model.lidar_height_m
+        polys += [o.footprint for o in self.truth_objects_map() if o.z_min <= lidar_z <= o.z_max and not o.legged]
+        p, r = metrics.map_agreement(grid, polys)
+        out["map_precision"] = float(p)
+        out["map_recall"] = float(r)
+        return out
+
+    def object_report(self):
+        from app.ocslam.evaluation import evaluate_objects
+
+        return evaluate_objects(
+            self.consciousness.objects,
+            self.truth_objects_map(),
+            self.truth_obstacles_map(),
+            self.cfg.consciousness.presence_threshold,
+        )
+
+    def summary(self) -> dict[str, Any]:
+        sim_t = self.sim.time
+        wall = self.wall_time_s or (time.perf_counter() - self.wall_start)
+        out: dict[str, Any] = {
+            "sim_time_s": round(sim_t, 3),
+            "wall_time_s": round(wall, 3),
+            "real_time_factor": round(sim_t / wall, 3) if wall > 0 else None,
+            "distance_m": round(self._true_distance, 3),
+            "world": self.world.name,
+            "detector": self.cfg.detector.kind if self.detector is not None else "none",
+            "consciousness_mode": self.cfg.consciousness.mode,
+            "collisions": int(getattr(self.sim, "collisions", 0)),
+        }
+        out.update(self.odometry_errors())
+        out.update(self.slam_metrics())
+        if self.detector is not None:
+            rep = self.object_report()
+            d = rep.as_dict()
+            out["objects"] = d
+            for k in ("in_scene", "in_map", "tp", "fn", "fp_legs", "fp_corner", "fp_other", "precision_strict",
+                      "precision_lenient", "recall", "pos_err_mean_m", "pos_err_max_m"):
+                if k in d:
+                    out[f"objects_{k}"] = d[k]
+        out["stages_ms_per_sim_s"] = {k: round(v, 3) for k, v in self.timer.per_sim_second_ms(sim_t).items()}
+        out["counters"] = {
+            "scans": self.counters.scans,
+            "images": self.counters.images,
+            "detections": self.counters.detections,
+            "fused_frames": self.counters.fused_frames,
+            "skipped": dict(self.counters.skipped_frames),
+            "errors": dict(self.counters.errors),
+            "slam_skipped": dict(getattr(self.slam, "skipped", {})),
+            "odometry_skipped": self.odometry.skipped,
+        }
+        if self.detector_error:
+            out["detector_error"] = self.detector_error
+        return out
+
+    def close(self) -> None:
+        self.sim.close()

@@ -1,0 +1,78 @@
+"""Real-browser helpers: headless Debian chromium driven by Playwright (no `playwright install`)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Callable, Iterator
+
+import pytest
+
+ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
+CHROMIUM_FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-quic",
+    "--no-first-run",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--use-gl=angle",
+]
+VIEWPORT = {"width": 800, "height": 600}
+
+
+def chromium_path() -> str | None:
+    for cand in (os.environ.get("OCSLAM_CHROMIUM"), shutil.which("chromium"), shutil.which("chromium-browser")):
+        if cand and Path(cand).exists():
+            return cand
+    return None
+
+
+@contextmanager
+def browser_page(url: str, *, pages: int = 1) -> Iterator[list]:
+    """Yield ``pages`` Playwright pages opened on ``url`` in one headless chromium."""
+    exe = chromium_path()
+    if exe is None:
+        pytest.skip("chromium not installed (make test installs Debian's chromium when run as root)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=exe, args=CHROMIUM_FLAGS)
+        try:
+            context = browser.new_context(viewport=VIEWPORT)
+            out = []
+            for _ in range(pages):
+                page = context.new_page()
+                page.goto(url, wait_until="domcontentloaded")
+                page.wait_for_selector("canvas", timeout=60_000)
+                out.append(page)
+            yield out
+        finally:
+            browser.close()
+
+
+def wait_for(cond: Callable[[], bool], timeout: float = 20.0, interval: float = 0.1, what: str = "condition") -> None:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if cond():
+            return
+        time.sleep(interval)
+    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+
+def screenshot(page, name: str) -> Path:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path))
+    return path
+
+
+def focus_canvas(page) -> None:
+    """Click an empty spot of the 3D canvas so hotkeys are not swallowed by a form field."""
+    box = page.locator("canvas").first.bounding_box()
+    page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + 12)

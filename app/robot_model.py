@@ -8,9 +8,9 @@ under the wheel-axle midpoint.
 
 Example:
     >>> robot = RobotModel.load()
-    >>> robot.lidar_height_m                       # 0.173
+    >>> robot.lidar_height_m  # 0.173
     >>> p_optical = np.linalg.inv(robot.T_base_camera_optical) @ [1.0, 0.0, 0.19, 1.0]
-    >>> p_optical[2]                               # ≈ 0.97: 1 m ahead of the robot is in front of the camera
+    >>> p_optical[2]  # ≈ 0.97: a point 1 m ahead of the robot is in front of the camera
 
 pybullet note (for the simulator): load with ``flags=URDF_USE_IMPLICIT_CYLINDER |
 URDF_USE_INERTIA_FROM_FILE`` (otherwise the wheel cylinders become convex hulls and the robot rides
@@ -101,7 +101,9 @@ def _wheel_radius(urdf: yourdfpy.URDF, link_name: str) -> float:
             return float(geom.cylinder.radius)
         if geom is not None and geom.sphere is not None:
             return float(geom.sphere.radius)
-    raise RobotModelError(f"wheel link {link_name!r} has no cylinder or sphere geometry to read its radius from")
+    raise RobotModelError(
+        f"wheel link {link_name!r} has no cylinder or sphere geometry to read its radius from"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,7 +142,7 @@ class RobotModel:
             raise RobotModelError(f"link {link!r} is not in {self.urdf_path.name}") from None
 
     @classmethod
-    def load(cls, path: Path | str | None = None) -> "RobotModel":
+    def load(cls, path: Path | str | None = None) -> RobotModel:
         """Read the robot from a URDF (default: ``DEFAULT_URDF``). Meshes are not loaded.
 
         Wheel radius comes from the left/right wheel link's cylinder, the separation from the

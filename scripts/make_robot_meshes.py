@@ -64,7 +64,9 @@ def _box(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float) -> tr
 
 
 def _cyl_z(r: float, z0: float, z1: float, x: float = 0.0, y: float = 0.0, sections: int = CYL_SECTIONS):
-    return trimesh.creation.cylinder(radius=r, height=z1 - z0, sections=sections, transform=_T(x, y, (z0 + z1) / 2))
+    return trimesh.creation.cylinder(
+        radius=r, height=z1 - z0, sections=sections, transform=_T(x, y, (z0 + z1) / 2)
+    )
 
 
 def _extrude(poly: Polygon, z0: float, z1: float) -> trimesh.Trimesh:
@@ -127,7 +129,9 @@ def boards() -> trimesh.Trimesh:
     parts.append(_box(BODY_CX - 0.010, BODY_CX + 0.010, -0.010, 0.010, z2 + 0.0076, z2 + 0.011))
     z3 = FLOOR_Z + PLATE_BOTTOMS_ABOVE_FLOOR[2] + PLATE_T
     parts.append(_box(BODY_CX - 0.0425, BODY_CX + 0.0425, -0.028, 0.028, z3 + 0.006, z3 + 0.0076))
-    parts.append(_box(BODY_CX + 0.020, BODY_CX + 0.041, -0.026, 0.026, z3 + 0.0076, z3 + 0.0236))  # USB/Ethernet
+    parts.append(
+        _box(BODY_CX + 0.020, BODY_CX + 0.041, -0.026, 0.026, z3 + 0.0076, z3 + 0.0236)
+    )  # USB/Ethernet
     parts.append(_box(BODY_CX - 0.020, BODY_CX - 0.006, -0.007, 0.007, z3 + 0.0076, z3 + 0.0096))  # SoC
     return trimesh.util.concatenate(parts)
 
@@ -138,9 +142,9 @@ def wheel_tyre() -> trimesh.Trimesh:
 
 
 def wheel_hub() -> trimesh.Trimesh:
-    """Rim disc with a raised hub on both faces, spin axis y (wheel link)."""
+    """Rim disc with spokes and a hub flush with the tyre faces, spin axis y (wheel link)."""
     disc = trimesh.creation.cylinder(radius=0.0266, height=0.012, sections=64, transform=_RX90)
-    hub = trimesh.creation.cylinder(radius=0.009, height=0.021, sections=24, transform=_RX90)
+    hub = trimesh.creation.cylinder(radius=0.009, height=WHEEL_W, sections=24, transform=_RX90)
     spokes = [
         trimesh.creation.box(
             extents=(0.044, 0.016, 0.005),
@@ -193,7 +197,9 @@ def camera_body() -> trimesh.Trimesh:
 
 def camera_lens() -> trimesh.Trimesh:
     """Lens barrel, flush with the optical centre x = 0 (camera_link)."""
-    return trimesh.creation.cylinder(radius=0.0065, height=0.004, sections=32, transform=_T(-0.002, 0, 0) @ _RY90)
+    return trimesh.creation.cylinder(
+        radius=0.0065, height=0.004, sections=32, transform=_T(-0.002, 0, 0) @ _RY90
+    )
 
 
 PARTS = {

@@ -212,9 +212,12 @@ class Pipeline:
         return int(c.width), int(c.height)
 
     def _on_reset(self) -> None:
-        enc = self.sim.read_encoders()
-        self.odometry.reset()
-        self.odometry.update(enc)
+        self.restart_odometry(Pose2())
+
+    def restart_odometry(self, T_odom_base: Pose2) -> None:
+        """Restart the wheel odometry at ``T_odom_base`` from the current encoder reading."""
+        self.odometry.reset(T_odom_base)
+        self.odometry.update(self.sim.read_encoders())
         self.odom_poses.clear()
         self.odom_poses.add(self.sim.time, self.odometry.T_odom_base)
 

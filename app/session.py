@@ -1,0 +1,262 @@
+"""Run directories ("sessions"): everything a run produced, written atomically, and loaded back.
+
+A run directory holds::
+
+    config.yaml          the config used (``ocslam run --config`` accepts it)
+    summary.json         metrics (headless: the run's summary)
+    map.yaml, map.pgm    the SLAM grid in map_server / Nav2 format
+    objects.json         the object map, one vision_msgs/Detection3D-shaped entry per object
+    trajectory_slam.tum  the SLAM trajectory (TUM: stamp x y z qx qy qz qw)
+    trajectory_odom.tum  the raw odometry
+    scene.viser          a viser recording of the run (robot along its path over the final map and objects),
+    scene.html           the same, as a self-contained HTML page playable offline
+    state.npz            SLAM keyframes/graph + tracker + sim state, so "Load session" can continue mapping
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from app.config import atomic_write_bytes, atomic_write_text
+from app.ocslam.messages import TrackedObject
+from app.ocslam.se2 import Pose2
+
+if TYPE_CHECKING:
+    from app.pipeline import Pipeline
+
+log = logging.getLogger(__name__)
+
+SESSION_VERSION = 1
+
+
+def _quat(yaw: float) -> dict[str, float]:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
+
+
+def object_to_detection3d(o: TrackedObject, stamp: float, frame_id: str) -> dict[str, Any]:
+    """One object as vision_msgs/Detection3D (field names one-to-one), plus OCSLAM's tracking fields."""
+    z = o.size_z / 2 if o.size_z > 0 else 0.0
+    pose = {"position": {"x": o.pose.x, "y": o.pose.y, "z": z}, "orientation": _quat(o.pose.yaw)}
+    return {
+        "header": {"stamp": stamp, "frame_id": frame_id},
+        "id": str(o.id),
+        "results": [{"hypothesis": {"class_id": o.label, "score": round(float(o.presence), 4)}, "pose": {"pose": pose}}],
+        "bbox": {"center": pose, "size": {"x": o.size_x, "y": o.size_y, "z": o.size_z}},
+        "presence": round(float(o.presence), 4),
+        "detection_confidence": round(float(o.detection_confidence), 4),
+        "frames_seen": int(o.frames_seen),
+        "source": o.source,
+    }
+
+
+def objects_json(pipe: "Pipeline", *, all_objects: bool = False) -> dict[str, Any]:
+    """The object map in the map frame (objects at presence ≥ threshold unless ``all_objects``)."""
+    thr = pipe.cfg.consciousness.presence_threshold
+    out = []
+    for o in pipe.consciousness.objects:
+        if not all_objects and o.presence < thr:
+            continue
+        if o.frame_id == "odom":  # seed mode keeps objects in odom: export them in map
+            from dataclasses import replace
+
+            o = replace(o, pose=pipe.T_map_odom @ o.pose, frame_id="map")
+        out.append(object_to_detection3d(o, pipe.time, "map"))
+    return {"frame_id": "map", "presence_threshold": thr, "stamp": pipe.time, "detections": out}
+
+
+def tum_lines(stamps: np.ndarray, poses: np.ndarray) -> str:
+    """TUM trajectory text: ``stamp x y z qx qy qz qw`` per line."""
+    lines = ["# timestamp tx ty tz qx qy qz qw"]
+    for t, (x, y, yaw) in zip(np.asarray(stamps), np.asarray(poses).reshape(-1, 3)):
+        lines.append(f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {math.sin(yaw / 2):.9f} {math.cos(yaw / 2):.9f}")
+    return "\n".join(lines) + "\n"
+
+
+def _npz_bytes(**arrays: Any) -> bytes:
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
+
+
+def _flatten(prefix: str, d: Any, out: dict[str, Any]) -> None:
+    """Nested dict/list of arrays/scalars → flat npz-able dict (keys joined with '/')."""
+    if isinstance(d, dict):
+        for k, v in d.items():
+            _flatten(f"{prefix}/{k}" if prefix else str(k), v, out)
+    elif isinstance(d, (list, tuple)) and d and all(isinstance(v, dict) for v in d):
+        out[f"{prefix}#len"] = np.array(len(d))
+        for i, v in enumerate(d):
+            _flatten(f"{prefix}#{i}", v, out)
+    else:
+        arr = np.asarray(d)
+        if arr.dtype == object:
+            arr = np.array(json.dumps(d, default=_json_default))
+            prefix = prefix + "#json"
+        out[prefix] = arr
+
+
+def _unflatten(flat: dict[str, np.ndarray]) -> dict[str, Any]:
+    root: dict[str, Any] = {}
+    lists: dict[str, int] = {}
+    for key in sorted(flat):
+        if key.endswith("#len"):
+            lists[key[:-4]] = int(flat[key])
+    for key, arr in flat.items():
+        if key.endswith("#len"):
+            continue
+        value: Any = arr
+        if key.endswith("#json"):
+            key = key[:-5]
+            value = json.loads(str(arr))
+        elif arr.ndim == 0:
+            value = arr.item()
+        parts = key.split("/")
+        node = root
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+
+    def fix(node: Any) -> Any:
+        if not isinstance(node, dict):
+            return node
+        keys = list(node)
+        out: dict[str, Any] = {}
+        for k in keys:
+            out[k] = fix(node[k])
+        # rebuild lists named "name#i"
+        listed: dict[str, dict[int, Any]] = {}
+        for k in list(out):
+            if "#" in k:
+                base, _, idx = k.rpartition("#")
+                if idx.isdigit():
+                    listed.setdefault(base, {})[int(idx)] = out.pop(k)
+        for base, items in listed.items():
+            out[base] = [items[i] for i in sorted(items)]
+        return out
+
+    res = fix(root)
+    for name, n in lists.items():  # empty lists
+        node = res
+        parts = name.split("/")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node.setdefault(parts[-1], [])
+    return res
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Pose2):
+        return [o.x, o.y, o.yaw]
+    return str(o)
+
+
+def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] | None = None, server: Any = None) -> Path:
+    """Write the run directory ``out`` (every file atomically). Returns ``out``."""
+    from app.ocslam.mapio import save_map
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    pipe.cfg.save(out / "config.yaml")
+    summary = summary if summary is not None else pipe.summary()
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=_json_default))
+    grid = pipe.slam.occupancy_grid()
+    if grid.width and grid.height:
+        save_map(grid, out / "map.yaml")
+    atomic_write_text(out / "objects.json", json.dumps(objects_json(pipe), indent=2, default=_json_default))
+    stamps, traj = pipe.slam.trajectory()
+    atomic_write_text(out / "trajectory_slam.tum", tum_lines(stamps, traj))
+    if pipe.truth_log:
+        s = np.array([t for t, _, _ in pipe.truth_log])
+        o = np.array([p.as_array() for _, _, p in pipe.truth_log])
+        atomic_write_text(out / "trajectory_odom.tum", tum_lines(s, o))
+    state = session_state(pipe)
+    flat: dict[str, Any] = {}
+    _flatten("", state, flat)
+    atomic_write_bytes(out / "state.npz", _npz_bytes(**flat))
+    try:
+        write_recording(pipe, out)
+    except Exception as e:  # the recording is a convenience; never lose the rest for it
+        log.warning("scene recording not written: %s", e)
+    return out
+
+
+def session_state(pipe: "Pipeline") -> dict[str, Any]:
+    return {
+        "version": SESSION_VERSION,
+        "sim_time": pipe.time,
+        "T_world_base_true": pipe.sim.true_pose().as_array(),
+        "T_odom_base": pipe.odometry.T_odom_base.as_array(),
+        "odometry_distance": pipe.odometry.distance_m,
+        "slam": pipe.slam.state_dict(),
+        "consciousness": pipe.consciousness.state_dict(),
+    }
+
+
+def load_session(pipe: "Pipeline", path: str | Path) -> None:
+    """Restore map, pose graph, objects and the robot's state from a run directory, to continue mapping."""
+    from app.ocslam.consciousness import Consciousness
+    from app.ocslam.slam import Slam
+
+    path = Path(path)
+    f = path / "state.npz"
+    if not f.is_file():
+        raise FileNotFoundError(f"{path} is not a session directory (no state.npz); save one with 'Save session'")
+    try:
+        with np.load(f, allow_pickle=False) as z:
+            state = _unflatten({k: z[k] for k in z.files})
+    except Exception as e:
+        raise ValueError(f"{f}: unreadable session state ({e})") from None
+    if int(state.get("version", 0)) != SESSION_VERSION:
+        raise ValueError(f"{f}: session version {state.get('version')} is not {SESSION_VERSION}")
+    slam = Slam.from_state_dict(pipe.cfg.slam, state["slam"], T_base_scan=pipe.T_base_scan)
+    cons = Consciousness.from_state_dict(pipe.cfg.consciousness, pipe.camera_model, state["consciousness"])
+    pipe.sim.set_robot_pose(Pose2.from_array(state["T_world_base_true"]))
+    pipe.slam = slam
+    pipe.consciousness = cons
+    pipe._slam_corrections = slam.correction_count
+    pipe.restart_odometry(Pose2.from_array(state["T_odom_base"]))
+    pipe.odometry.distance_m = float(state.get("odometry_distance", 0.0))
+    pipe.scans.clear()
+    pipe.last_scan = None
+    pipe.stop_autonomy("session loaded")
+
+
+def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> None:
+    """A `.viser` recording (and a self-contained HTML player): the final map, objects and graph, with the
+    robot replaying its SLAM trajectory."""
+    from app.ui.scene import SceneLayers
+    from app.ui.security import create_server
+
+    server, _ = create_server("127.0.0.1", 0)
+    try:
+        layers = SceneLayers(server, pipe)
+        for key in ("truth", "graph"):
+            layers.set_visible(key, key == "graph")
+        layers.update(with_map=True)
+        rec = server.get_scene_serializer()
+        stamps, traj = pipe.slam.trajectory()
+        if len(traj) > 1:
+            idx = np.linspace(0, len(traj) - 1, min(max_frames, len(traj))).astype(int)
+            dt = float(np.median(np.diff(stamps[idx]))) if len(idx) > 1 else 0.1
+            for i in idx:
+                T = Pose2.from_array(traj[i])
+                layers._set_pose(layers.robot_root, T)
+                rec.insert_sleep(min(max(dt / 4.0, 0.02), 0.25))  # 4× faster than real time
+        atomic_write_bytes(out / "scene.viser", rec.serialize())
+        try:
+            atomic_write_text(out / "scene.html", rec.as_html())
+        except Exception as e:
+            log.info("no HTML player: %s", e)
+    finally:
+        server.stop()

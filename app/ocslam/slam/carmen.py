@@ -1,0 +1,170 @@
+"""CARMEN log reader (``*.clf`` / ``*.clf.bz2`` / ``*.log``): front-laser scans with odometry.
+
+- ``FLASER n r_1 … r_n x y theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname logger_timestamp``.
+- Beam layout (CARMEN's rule): the first beam at −90° from the heading, spaced 1° for 180/181 beams,
+  0.5° for 360/361, 0.25° for 400/401, else the 180° field of view spread evenly over the beams.
+- A reading at (or beyond) the log's maximum range means *no return*: it becomes ``inf`` (the
+  :class:`~app.ocslam.messages.LaserScan` convention). The maximum is ``PARAM robot_front_laser_max``
+  / ``laser_front_laser_max`` / ``robot_frontlaser_max`` when present, else the largest reading of
+  the log if it repeats (the sensor's saturation value), else 81.0 m.
+- ``PARAM robot_frontlaser_offset`` (metres along the robot's x axis) gives ``T_base_scan``.
+- Odometry at each scan's stamp: interpolated from the ``ODOM`` lines when the log has them, else the
+  ``odom_*`` pose inside the ``FLASER`` line.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.ocslam.messages import LaserScan
+from app.ocslam.se2 import Pose2, interpolate
+
+
+class CarmenError(ValueError):
+    """A CARMEN log is missing, unreadable or has no usable FLASER lines."""
+
+
+def beam_layout(n: int) -> tuple[float, float]:
+    """``(angle_min, angle_increment)`` in radians for an ``n``-beam CARMEN front laser."""
+    if n <= 0:
+        raise CarmenError(f"FLASER with {n} readings")
+    deg = {180: 1.0, 181: 1.0, 360: 0.5, 361: 0.5, 400: 0.25, 401: 0.25}.get(n)
+    inc = math.radians(deg) if deg is not None else math.pi / n
+    return -math.pi / 2.0, inc
+
+
+@dataclass
+class CarmenLog:
+    """A parsed log: ``stamps`` ``(N,)``, ``ranges`` list of ``(n_i,)`` (``inf`` = no return),
+    ``odom`` ``(N, 3)`` ``T_odom_base`` at each scan, ``flaser_odom`` ``(N, 3)`` the pose inside FLASER,
+    ``T_base_scan``, ``max_range`` and the ``params`` found."""
+
+    stamps: NDArray[np.float64]
+    ranges: list[NDArray[np.float64]]
+    odom: NDArray[np.float64]
+    flaser_odom: NDArray[np.float64]
+    T_base_scan: Pose2
+    max_range: float
+    params: dict[str, str]
+    stamp_strings: list[str]
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    @property
+    def duration(self) -> float:
+        return float(self.stamps[-1] - self.stamps[0]) if len(self.stamps) > 1 else 0.0
+
+    def scan(self, i: int) -> LaserScan:
+        r = self.ranges[i]
+        amin, inc = beam_layout(len(r))
+        return LaserScan(
+            stamp=float(self.stamps[i]),
+            angle_min=amin,
+            angle_increment=inc,
+            range_min=0.0,
+            range_max=self.max_range,
+            ranges=r,
+            frame_id="base_scan",
+        )
+
+
+def _open(path: Path):
+    if path.suffix == ".bz2":
+        return bz2.open(path, "rt", errors="replace")
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", errors="replace")
+    return open(path, "rt", errors="replace")
+
+
+_MAX_PARAMS = ("robot_front_laser_max", "laser_front_laser_max", "robot_frontlaser_max")
+
+
+def read_carmen(path: str | Path) -> CarmenLog:
+    """Parse a CARMEN log; malformed lines are skipped. Raises :class:`CarmenError` if nothing is usable."""
+    path = Path(path)
+    if not path.exists():
+        raise CarmenError(f"{path}: no such file")
+    params: dict[str, str] = {}
+    odom_t: list[float] = []
+    odom_p: list[tuple[float, float, float]] = []
+    stamps: list[float] = []
+    stamp_s: list[str] = []
+    ranges: list[NDArray[np.float64]] = []
+    fodom: list[tuple[float, float, float]] = []
+    try:
+        with _open(path) as fh:
+            for line in fh:
+                tok = line.split()
+                if not tok or tok[0].startswith("#"):
+                    continue
+                kind = tok[0]
+                try:
+                    if kind == "PARAM" and len(tok) >= 3:
+                        params[tok[1]] = tok[2]
+                    elif kind == "ODOM" and len(tok) >= 8:
+                        odom_t.append(float(tok[7]))
+                        odom_p.append((float(tok[1]), float(tok[2]), float(tok[3])))
+                    elif kind == "FLASER" and len(tok) >= 2:
+                        n = int(tok[1])
+                        if n <= 0 or len(tok) < 2 + n + 7:
+                            continue
+                        r = np.array(tok[2 : 2 + n], dtype=np.float64)
+                        o = 2 + n
+                        fodom.append((float(tok[o + 3]), float(tok[o + 4]), float(tok[o + 5])))
+                        stamps.append(float(tok[o + 6]))
+                        stamp_s.append(tok[o + 6])
+                        ranges.append(r)
+                except ValueError:
+                    continue
+    except (OSError, EOFError) as e:
+        raise CarmenError(f"{path}: cannot read ({e})") from e
+    if not stamps:
+        raise CarmenError(f"{path}: no FLASER lines")
+    st = np.array(stamps)
+    max_range = None
+    for k in _MAX_PARAMS:
+        if k in params:
+            try:
+                max_range = float(params[k])
+            except ValueError:
+                pass
+    if max_range is None:
+        allr = np.concatenate(ranges)
+        top = float(allr.max())
+        max_range = top if np.count_nonzero(allr >= top - 1e-6) > 1 else 81.0
+    # readings at the maximum (within a centimetre or so) are "no return"
+    out_r = []
+    for r in ranges:
+        r = r.copy()
+        r[r >= max_range - 0.011] = np.inf
+        out_r.append(r)
+    try:
+        offset = float(params.get("robot_frontlaser_offset", "0") or 0.0)
+    except ValueError:
+        offset = 0.0
+    fo = np.array(fodom).reshape(-1, 3)
+    if len(odom_t) >= 2:
+        ot = np.array(odom_t)
+        op = np.array(odom_p)
+        order = np.argsort(ot, kind="stable")
+        odom = interpolate(st, ot[order], op[order])
+    else:
+        odom = fo.copy()
+    return CarmenLog(
+        stamps=st,
+        ranges=out_r,
+        odom=odom,
+        flaser_odom=fo,
+        T_base_scan=Pose2(offset, 0.0, 0.0),
+        max_range=float(max_range),
+        params=params,
+        stamp_strings=stamp_s,
+    )

@@ -1,0 +1,160 @@
+"""Loop closure: match a new keyframe against older submaps with a global correlative search.
+
+Keyframes are grouped into *submaps* of ``submap_keyframes`` consecutive keyframes (plus half a submap
+of overlap). A finished submap's :class:`~app.ocslam.slam.field.MatchField` is built once, in the frame
+of its first keyframe (its *anchor*), and cached; it is rebuilt only if an optimisation changed the
+relative poses of its keyframes. For a new keyframe ``k``, the submaps that have a keyframe within
+``loop_search_radius_m`` of ``k`` (and are old enough not to be part of the local map) are searched with
+branch and bound over a ``±loop_window_xy_m × ±loop_window_yaw_rad`` window. The query is the keyframe's
+local cloud (its scan and its predecessors', voxel-downsampled), which is more distinctive than one scan.
+
+Acceptance (strict): the discrete score must reach ``loop_min_score``, the continuous refinement must
+keep at least ``loop_min_inliers`` of the query points within 5 cm of the submap's surfaces, and the
+refinement must not wander more than two cells from the discrete optimum. The pose graph then adds the
+edge with a robust (Cauchy) kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.ocslam.config import SlamConfig
+from app.ocslam.se2 import between, transform_points, wrap_angle
+from app.ocslam.slam.field import MatchField, build_field
+from app.ocslam.slam.keyframes import Keyframes
+from app.ocslam.slam.matcher import correlative_search, refine
+
+
+@dataclass
+class LoopClosure:
+    anchor: int  # keyframe index of the submap's anchor (edge from `anchor` to `keyframe`)
+    keyframe: int
+    measurement: NDArray[np.float64]  # (3,) T_anchor_keyframe
+    score: float
+    inlier_fraction: float
+
+
+@dataclass
+class _Submap:
+    first: int
+    last: int  # exclusive
+    rel: NDArray[np.float64]  # (n, 3) T_anchor_kf used to build the field
+    field: MatchField | None
+
+
+def voxel_downsample(points: NDArray[np.float64], voxel: float) -> NDArray[np.float64]:
+    """One point (the mean) per ``voxel``-sized cell of ``(N, 2)`` points."""
+    if len(points) == 0:
+        return points
+    key = np.floor(points / voxel).astype(np.int64)
+    _, inv, cnt = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_inverse=True, return_counts=True)
+    out = np.zeros((len(cnt), 2))
+    np.add.at(out, inv, points)
+    return out / cnt[:, None]
+
+
+class LoopCloser:
+    """Finds loop closures of new keyframes against cached older submaps (see the module docstring)."""
+
+    def __init__(self, cfg: SlamConfig) -> None:
+        self.cfg = cfg
+        self.submaps: dict[int, _Submap] = {}
+        self.searches = 0
+        self.accepted = 0
+
+    def _submap_range(self, s: int) -> tuple[int, int]:
+        S = self.cfg.submap_keyframes
+        return s * S, (s + 1) * S + S // 2
+
+    def submap(self, kfs: Keyframes, s: int) -> _Submap:
+        first, last = self._submap_range(s)
+        poses = kfs.poses.data
+        rel = between(poses[first], poses[first:last])
+        sm = self.submaps.get(s)
+        if sm is not None:
+            d = rel - sm.rel
+            d[:, 2] = wrap_angle(d[:, 2])
+            if np.max(np.abs(d[:, :2])) < 0.5 * self.cfg.match_resolution_m and np.max(np.abs(d[:, 2])) < 0.005:
+                return sm
+        pts = [transform_points(rel[i], kfs.scans[first + i].points) for i in range(last - first)]
+        fld = build_field(
+            np.vstack(pts) if pts else np.zeros((0, 2)),
+            self.cfg.match_resolution_m,
+            self.cfg.match_sigma_m,
+            margin_m=self.cfg.loop_window_xy_m + 0.5,
+        )
+        sm = _Submap(first, last, rel, fld)
+        self.submaps[s] = sm
+        return sm
+
+    def query_cloud(self, kfs: Keyframes, k: int) -> NDArray[np.float64]:
+        """``(Q, 2)`` points of keyframe ``k`` and its predecessors in ``k``'s frame, downsampled."""
+        n = self.cfg.loop_query_keyframes
+        poses = kfs.poses.data
+        first = max(0, k - n + 1)
+        rel = between(poses[k], poses[first : k + 1])
+        pts = np.vstack([transform_points(rel[i], kfs.scans[first + i].points) for i in range(k + 1 - first)])
+        pts = voxel_downsample(pts, 2.0 * self.cfg.match_resolution_m)
+        if len(pts) > self.cfg.loop_query_max_points:
+            sel = np.linspace(0, len(pts) - 1, self.cfg.loop_query_max_points).astype(np.int64)
+            pts = pts[sel]
+        return pts
+
+    def candidates(self, kfs: Keyframes, k: int) -> list[int]:
+        """Submap ids worth searching for keyframe ``k``, nearest first."""
+        cfg = self.cfg
+        S = cfg.submap_keyframes
+        # a submap is eligible once it is complete and older than the local map window
+        newest = k - cfg.local_map_keyframes - cfg.loop_min_gap_keyframes
+        n_sub = max(0, (newest - S // 2) // S)
+        if n_sub <= 0:
+            return []
+        last_kf = self._submap_range(n_sub - 1)[1]
+        poses = kfs.poses.data
+        d = np.hypot(*(poses[:last_kf, :2] - poses[k, :2]).T)
+        sid = np.arange(last_kf) // S
+        sid = np.minimum(sid, n_sub - 1)
+        best = np.full(n_sub, np.inf)
+        np.minimum.at(best, sid, d)
+        ids = np.flatnonzero(best < cfg.loop_search_radius_m)
+        ids = ids[np.argsort(best[ids])]
+        return [int(s) for s in ids[: cfg.loop_max_candidates]]
+
+    def search(self, kfs: Keyframes, k: int) -> list[LoopClosure]:
+        """Try to close loops from keyframe ``k``; returns the accepted closures."""
+        cfg = self.cfg
+        cands = self.candidates(kfs, k)
+        if not cands:
+            return []
+        query = self.query_cloud(kfs, k)
+        if len(query) < cfg.min_points:
+            return []
+        poses = kfs.poses.data
+        out: list[LoopClosure] = []
+        for s in cands:
+            sm = self.submap(kfs, s)
+            if sm.field is None:
+                continue
+            self.searches += 1
+            center = between(poses[sm.first], poses[k])
+            res = correlative_search(
+                sm.field, query, center, cfg.loop_window_xy_m, cfg.loop_window_yaw_rad, cfg.match_yaw_step_rad, cfg.loop_min_score
+            )
+            if res is None:
+                continue
+            ref = refine(sm.field, query, res.pose, max_dist_m=2.0 * cfg.match_resolution_m, robust_m=cfg.match_robust_m)
+            moved = np.hypot(*(ref.pose[:2] - res.pose[:2]))
+            if ref.inlier_fraction < cfg.loop_min_inliers or moved > 2.0 * cfg.match_resolution_m:
+                continue
+            self.accepted += 1
+            out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction))
+        return out
+
+    def forget(self) -> None:
+        self.submaps.clear()
+
+
+__all__ = ["LoopCloser", "LoopClosure", "voxel_downsample"]

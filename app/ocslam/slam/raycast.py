@@ -52,7 +52,8 @@ def traverse(start: NDArray[np.float64], ends: NDArray[np.float64]) -> tuple[NDA
         entered = c0[axis] + sgn * k
         t = (line - start[axis]) / d[beam, axis]
         other = 1 - axis
-        o = np.floor(start[other] + t * d[beam, other]).astype(np.int64)
+        # the other coordinate just after the crossing (so a corner crossing enters the diagonal cell)
+        o = np.floor(start[other] + (t + 1e-9) * d[beam, other]).astype(np.int64)
         # keep the "other" coordinate inside the segment's own range (guards rounding at lattice corners)
         lo = np.minimum(c0[other], c1[beam, other])
         hi = np.maximum(c0[other], c1[beam, other])

@@ -86,15 +86,26 @@ class SimConfig:
         1.0, min=0.1, max=20.0, step=0.1, help="target sim speed in the live app (1 = real time)", live=True
     )
     route: str = param("tour", help="route followed by headless runs and 'Follow route'")
+    motor_time_constant_s: float = param(
+        0.05, min=0.0, max=2.0, unit="s", help="wheel rates follow the command with this first-order lag"
+    )
+    robot_height_m: float = param(0.192, min=0.05, max=2.0, unit="m", help="height of the robot's collision cylinder")
+    light_direction: list = param([0.3, -0.4, 1.0], help="render light direction [x, y, z] (world frame)")
+    light_ambient: float = param(0.6, min=0.0, max=1.0, help="render ambient light coefficient")
+    light_diffuse: float = param(0.5, min=0.0, max=1.0, help="render diffuse light coefficient")
 
 
 @dataclass
 class EncoderConfig:
-    """Wheel encoders (absolute angles)."""
+    """Wheel encoders (absolute angles) and the wheel–floor slip that makes odometry drift."""
 
     rate_hz: float = param(50.0, min=1.0, max=1000.0, unit="Hz", help="odometry update rate")
     noise_std_rad: float = param(0.002, min=0.0, max=0.5, unit="rad", help="σ of each angle reading")
     slip_std: float = param(0.02, min=0.0, max=0.5, help="σ of the relative wheel slip (per wheel, slowly varying)")
+    slip_tau_s: float = param(0.05, min=0.001, max=100.0, unit="s", help="correlation time of the wheel slip")
+    radius_error_std: float = param(
+        0.0, min=0.0, max=0.05, help="σ of a per-run relative error of each wheel's effective radius (systematic drift)"
+    )
     resolution_rad: float = param(0.0015, min=0.0, max=0.1, unit="rad", help="encoder quantisation (4096 ticks/rev)")
 
 
@@ -103,7 +114,7 @@ class LidarConfig:
     """LDS-01-like 2D LIDAR."""
 
     beams: int = param(360, min=8, max=4096, help="beams over 360°")
-    range_min_m: float = param(0.12, min=0.0, max=5.0, unit="m", help="minimum range")
+    range_min_m: float = param(0.12, min=0.0, max=5.0, unit="m", help="minimum range (closer: -inf, REP-117)")
     range_max_m: float = param(3.5, min=0.5, max=100.0, unit="m", help="maximum range (no return → inf)")
     rate_hz: float = param(5.0, min=0.5, max=100.0, unit="Hz", help="scan rate")
     noise_std_m: float = param(0.01, min=0.0, max=0.5, step=0.001, unit="m", help="Gaussian range noise σ")
@@ -120,7 +131,10 @@ class CameraConfig:
     near_m: float = param(0.05, min=0.001, max=1.0, unit="m", help="render near plane")
     far_m: float = param(20.0, min=1.0, max=200.0, unit="m", help="render far plane")
     render_width: int = param(
-        0, min=0, max=1920, help="render at this width and upscale K (0: full width); the loop bench renders at the detector size"
+        0,
+        min=0,
+        max=1920,
+        help="render at this width (height keeps the aspect; the frame's K matches the rendered size); 0: full width",
     )
     noise_std: float = param(2.0, min=0.0, max=50.0, help="pixel noise σ (0-255)")
 

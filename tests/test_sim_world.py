@@ -1,0 +1,270 @@
+"""The pybullet simulation: LIDAR, camera intrinsics, segmentation, drive, collisions, ground truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from shapely.geometry import Point, Polygon
+
+from app.config import Config
+from app.ocslam.messages import Twist
+from app.ocslam.se2 import Pose2
+from app.sim_world import SimWorld, pose3
+from app.worlds import Wall, World, WorldObject, load_world
+
+
+def box_room(half: float = 3.0, thickness: float = 0.2, objects: list[WorldObject] | None = None, start: Pose2 | None = None) -> World:
+    """A square room; wall inner faces at ±(half − thickness/2)."""
+    h = half
+    corners = [(-h, -h), (h, -h), (h, h), (-h, h)]
+    walls = [Wall(corners[k], corners[(k + 1) % 4], thickness, 2.4) for k in range(4)]
+    return World(name="box", walls=walls, objects=objects or [], start=start or Pose2())
+
+
+def quiet_config(**over) -> Config:
+    cfg = Config()
+    cfg.encoders.slip_std = 0.0
+    cfg.encoders.noise_std_rad = 0.0
+    cfg.encoders.resolution_rad = 0.0
+    cfg.camera.noise_std = 0.0
+    for k, v in over.items():
+        cfg.set(k, v)
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def apartment_sim():
+    sim = SimWorld(load_world("assets/worlds/apartment.yaml"), Config(), seed=1)
+    yield sim
+    sim.close()
+
+
+def test_lidar_range_to_known_wall():
+    sim = SimWorld(box_room(), Config(), seed=3)
+    try:
+        scan = sim.scan()
+        assert len(scan.ranges) == 360 and scan.angle_min == pytest.approx(-math.pi)
+        assert scan.angle_increment == pytest.approx(math.radians(1.0))
+        x_scan = sim.robot_model.T_base_scan[0, 3]  # the LIDAR sits behind the axle
+        sigma = Config().lidar.noise_std_m
+        inner = 3.0 - 0.1
+        ahead = scan.ranges[180]  # angle 0
+        assert abs(ahead - (inner - x_scan)) < 3 * sigma
+        behind = scan.ranges[0]  # angle -π
+        assert abs(behind - (inner + x_scan)) < 3 * sigma
+        left = scan.ranges[270]  # angle +π/2
+        assert abs(left - inner) < 3 * sigma
+        assert scan.stamp == sim.time
+    finally:
+        sim.close()
+
+
+def test_lidar_no_return_is_inf_and_noise_statistics():
+    cfg = Config()
+    cfg.lidar.range_max_m = 2.0  # walls at 2.9 m: out of range everywhere
+    sim = SimWorld(box_room(), cfg, seed=0)
+    try:
+        assert np.all(np.isposinf(sim.scan().ranges))
+    finally:
+        sim.close()
+    cfg = Config()
+    sim = SimWorld(box_room(), cfg, seed=0)
+    try:
+        r = np.array([sim.scan().ranges[180] for _ in range(200)])
+        assert abs(r.std() - cfg.lidar.noise_std_m) < 0.003
+        assert abs(r.mean() - (2.9 - sim.robot_model.T_base_scan[0, 3])) < 0.003
+    finally:
+        sim.close()
+
+
+def test_camera_K_matches_projection_of_a_known_point():
+    ball = WorldObject("ball", "play_ball", 2.0, 0.35, 0.0)
+    sim = SimWorld(box_room(objects=[ball]), quiet_config(), seed=0)
+    try:
+        frame = sim.render_camera(320, 240, segmentation=True, depth=True)
+        K = frame.info.K
+        assert K[0, 0] == pytest.approx(160 / math.tan(1.04 / 2))
+        mask = frame.segmentation == 0
+        assert mask.sum() > 50
+        rows, cols = np.nonzero(mask)
+        # the ball's centre in the optical frame, projected with K
+        T_world_cam = sim.T_world_base3() @ sim.robot_model.T_base_camera_optical
+        X = np.linalg.inv(T_world_cam) @ np.array([2.0, 0.35, 0.11, 1.0])
+        uvw = K @ X[:3]
+        u, v = uvw[0] / uvw[2], uvw[1] / uvw[2]
+        # pixel (i, j) covers [j, j+1) × [i, i+1): its centre is (j + 0.5, i + 0.5)
+        assert abs(cols.mean() + 0.5 - u) < 1.0
+        assert abs(rows.mean() + 0.5 - v) < 1.0
+        # depth at the ball's centre pixel: distance to its near surface along optical z
+        d = frame.depth[int(v), int(u)]
+        assert abs(d - (X[2] - 0.11)) < 0.02
+    finally:
+        sim.close()
+
+
+def test_segmentation_ids_match_ground_truth(apartment_sim):
+    sim = apartment_sim
+    truth = {o.id: o for o in sim.ground_truth_objects()}
+    seen_total = set()
+    for pose in (Pose2(-0.75, -2.2, -1.9), Pose2(-4.5, -4.6, -2.4), Pose2(-7.5, -3.5, 2.2), Pose2(-4.6, -1.8, 2.6)):
+        frame = sim.render_view(pose, width=160, height=120, depth=True)
+        K_inv = np.linalg.inv(frame.info.K)
+        ids = set(np.unique(frame.segmentation)) - {-1}
+        assert ids <= set(truth)
+        seen_total |= ids
+        for k in ids:
+            rows, cols = np.nonzero(frame.segmentation == k)
+            pix = np.stack([cols + 0.5, rows + 0.5, np.ones(len(rows))])
+            rays = K_inv @ pix
+            pts = rays * frame.depth[rows, cols][None, :]
+            world = (frame.T_world_camera @ np.vstack([pts, np.ones(len(rows))]))[:3].T
+            poly = Polygon(truth[k].footprint).buffer(0.05)
+            inside = np.mean([poly.contains(Point(x, y)) for x, y in world[:, :2]])
+            assert inside > 0.97, f"object {k} ({truth[k].label}): only {inside:.0%} of its pixels fall in its footprint"
+            assert world[:, 2].min() > truth[k].z_min - 0.05 and world[:, 2].max() < truth[k].z_max + 0.05
+    assert len(seen_total) >= 6
+
+
+def test_ground_truth_footprints_contain_positions(apartment_sim):
+    objs = apartment_sim.ground_truth_objects()
+    assert len(objs) == 14 and {o.label for o in objs} >= {"table", "dog", "duck", "door"}
+    for o in objs:
+        poly = Polygon(o.footprint)
+        assert poly.is_valid and poly.exterior.is_ccw
+        assert poly.contains(Point(o.pose.x, o.pose.y)), o.name
+        assert 0.0 <= o.z_min < o.z_max
+    legged = {o.label for o in objs if o.legged}
+    assert {"table", "dog", "person"} <= legged
+    duck = next(o for o in objs if o.label == "duck")
+    assert duck.z_max < sim_lidar_height(apartment_sim)
+    walls = [o for o in apartment_sim.ground_truth_obstacles() if o.kind == "wall"]
+    assert len(walls) >= 5
+
+
+def sim_lidar_height(sim: SimWorld) -> float:
+    return float(sim.robot_model.T_base_scan[2, 3])
+
+
+def test_drive_straight_moves_v_t_and_encoders_agree():
+    cfg = Config()  # default slip and encoder noise
+    sim = SimWorld(box_room(half=5.0, start=Pose2(-3.0, 0.0, 0.0)), cfg, seed=5)
+    try:
+        e0 = sim.read_encoders()
+        sim.set_cmd_vel(Twist(0.2, 0.0))
+        sim.step(int(round(10.0 / sim.dt)))
+        assert sim.time == pytest.approx(10.0)
+        p = sim.true_pose()
+        tau = cfg.sim.motor_time_constant_s
+        expected = 0.2 * (10.0 - tau)
+        assert abs(p.x - (-3.0 + expected)) < 0.03 * expected
+        assert abs(p.y) < 0.1 and abs(p.yaw) < 0.05
+        e1 = sim.read_encoders()
+        r = sim.robot_model.wheel_radius_m
+        enc_dist = ((e1.left_rad - e0.left_rad) + (e1.right_rad - e0.right_rad)) / 2 * r
+        assert abs(enc_dist - (p.x + 3.0)) < 0.03 * expected
+        assert e1.stamp == pytest.approx(10.0)
+        assert sim.collisions == 0 and not sim.in_collision()
+    finally:
+        sim.close()
+
+
+def test_seed_mode_turns_2_2_times_faster():
+    for mode, factor in (("correct", 1.0), ("seed", 2 * 0.178 / 0.160)):
+        cfg = quiet_config(**{"robot.odometry_mode": mode, "sim.motor_time_constant_s": 0.0})
+        sim = SimWorld(box_room(), cfg, seed=0)
+        try:
+            sim.set_cmd_vel(Twist(0.0, 0.5))
+            sim.step(100)
+            assert sim.true_pose().yaw == pytest.approx(0.5 * factor, rel=1e-6)
+        finally:
+            sim.close()
+
+
+def test_robot_cannot_pass_through_a_wall():
+    sim = SimWorld(box_room(half=2.0), quiet_config(), seed=0)
+    try:
+        sim.set_cmd_vel(Twist(0.22, 0.0))
+        sim.step(int(20.0 / sim.dt))  # 4.4 m of wheel travel toward a wall 1.9 m away
+        p = sim.true_pose()
+        inner = 2.0 - 0.1
+        assert p.x < inner - sim.robot_radius + 1e-3
+        assert p.x > inner - sim.robot_radius - 0.01  # it stops at the wall, not before
+        assert sim.in_collision() and sim.collisions == 1
+        # the wheels kept turning (slip against the wall): encoders overestimate the travel
+        e = sim.read_encoders()
+        assert e.left_rad * sim.robot_model.wheel_radius_m > 4.0
+        # it can turn in place and drive away
+        sim.set_cmd_vel(Twist(0.0, 1.0))
+        sim.step(int(math.pi / sim.dt))
+        sim.set_cmd_vel(Twist(0.2, 0.0))
+        sim.step(100)
+        assert not sim.in_collision() and sim.true_pose().x < p.x - 0.1
+    finally:
+        sim.close()
+
+
+def test_deterministic_for_a_seed_and_reset():
+    world = box_room()
+
+    def run(seed: int):
+        sim = SimWorld(world, Config(), seed=seed)
+        try:
+            sim.set_cmd_vel(Twist(0.15, 0.4))
+            sim.step(300)
+            return sim.true_pose(), sim.read_encoders(), sim.scan().ranges.copy()
+        finally:
+            sim.close()
+
+    a, b, c = run(4), run(4), run(5)
+    assert a[0] == b[0] and a[1] == b[1] and np.array_equal(a[2], b[2])
+    assert a[0] != c[0]
+    sim = SimWorld(world, Config(), seed=4)
+    try:
+        sim.set_cmd_vel(Twist(0.15, 0.4))
+        sim.step(50)
+        sim.reset()
+        assert sim.time == 0.0 and sim.true_pose() == world.start
+    finally:
+        sim.close()
+
+
+def test_encoders_quantised_and_noisy():
+    cfg = Config()
+    cfg.encoders.noise_std_rad = 0.0
+    cfg.encoders.resolution_rad = 0.01
+    sim = SimWorld(box_room(), cfg, seed=0)
+    try:
+        sim.set_cmd_vel(Twist(0.1, 0.0))
+        sim.step(37)
+        e = sim.read_encoders()
+        assert e.left_rad / 0.01 == pytest.approx(round(e.left_rad / 0.01), abs=1e-9)
+        assert abs(e.left_rad - sim.wheel_angles[0]) <= 0.005 + 1e-12
+    finally:
+        sim.close()
+
+
+def test_render_camera_default_size_and_render_width():
+    cfg = quiet_config()
+    cfg.camera.render_width = 160
+    sim = SimWorld(box_room(), cfg, seed=0)
+    try:
+        f = sim.render_camera()
+        assert f.image.data.shape == (120, 160, 3) and f.image.data.dtype == np.uint8
+        assert f.info.width == 160 and f.info.K[0, 2] == 80.0
+        assert f.depth is None and f.segmentation is None
+        v = sim.render_view(Pose2(0, 0, 0), width=64, height=48, pitch_rad=0.3, camera_z=0.5)
+        assert v.segmentation.shape == (48, 64) and v.segmentation.dtype == np.int32
+        # pitched down 0.3 rad: the optical axis points below the horizon
+        assert v.T_world_camera[2, 2] == pytest.approx(-math.sin(0.3))
+        assert v.T_world_camera[2, 3] == pytest.approx(0.5)
+    finally:
+        sim.close()
+
+
+def test_pose3_matches_pose2():
+    T = Pose2(1.0, -2.0, 0.7)
+    M = pose3(T, 0.3)
+    q = M @ np.array([0.5, 0.25, 0.0, 1.0])
+    assert np.allclose(q[:2], T.transform_points(np.array([[0.5, 0.25]]))[0]) and q[2] == pytest.approx(0.3)

@@ -1,0 +1,114 @@
+"""Physical priors of the detector's 11 classes: footprint, height, legs, LIDAR cross-section.
+
+The Consciousness node uses them to tell a right island from a wrong one (the *corner problem*),
+to group the legs of one object, to complete the footprint of an object seen from one side, and to
+place objects the LIDAR cannot see (below its plane) from the camera alone.
+
+Sizes come from the paper's apartment (spec §5) and are widened for the random worlds, which
+scale objects by up to ±20 % and vary the models. Each size is ``(min, nominal, max)`` in metres:
+
+- ``length``: the longer horizontal side of the object's footprint,
+- ``width``: the shorter horizontal side,
+- ``height``: the top above the floor.
+
+``legged``: the LIDAR plane cuts the object in several separate legs (table, dog, person).
+``solid_fraction``: the central fraction of the box's width in which the object blocks the LIDAR
+beams (a door blocks all of it, a potted plant only its pot): used by the see-through check.
+``on_wall``: the object sits in a wall (doors), so its island legitimately continues into the wall.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from app.ocslam.messages import CLASS_NAMES
+
+
+@dataclass(frozen=True, slots=True)
+class ClassPrior:
+    """Physical size and LIDAR appearance of one class (metres)."""
+
+    name: str
+    length: tuple[float, float, float]
+    width: tuple[float, float, float]
+    height: tuple[float, float, float]
+    legged: bool = False
+    solid_fraction: float = 0.0
+    on_wall: bool = False
+    #: Largest horizontal extent of one leg island (m); islands larger than this are never legs.
+    leg_size_max: float = 0.35
+
+    def __post_init__(self) -> None:
+        for key in ("length", "width", "height"):
+            lo, nom, hi = getattr(self, key)
+            if not (0.0 < lo <= nom <= hi):
+                raise ValueError(f"class prior {self.name}.{key}: need 0 < min <= nominal <= max, got {(lo, nom, hi)}")
+        if self.width[2] > self.length[2] or self.width[1] > self.length[1]:
+            raise ValueError(f"class prior {self.name}: width is the shorter side")
+
+    # -- derived extents ---------------------------------------------------------------------------
+    @property
+    def apparent_width_min(self) -> float:
+        """Smallest horizontal extent the object can show to the camera (its thinnest side)."""
+        return self.width[0]
+
+    @property
+    def apparent_width_max(self) -> float:
+        """Largest horizontal extent it can show (the diagonal of the largest footprint)."""
+        return float(np.hypot(self.length[2], self.width[2]))
+
+    @property
+    def diagonal_nominal(self) -> float:
+        return float(np.hypot(self.length[1], self.width[1]))
+
+    def below_plane(self, z: float) -> bool:
+        """True if even the tallest instance stays below height ``z`` (the LIDAR never sees it)."""
+        return self.height[2] < z
+
+    def may_be_below_plane(self, z: float, margin: float = 0.03) -> bool:
+        """True if a small instance may pass under the plane at ``z`` or only graze it."""
+        return self.height[0] < z + margin
+
+    def fits(self, extent_a: float, extent_b: float, tolerance: float = 0.15) -> bool:
+        """True if a footprint with these two extents fits inside the largest instance."""
+        big, small = max(extent_a, extent_b), min(extent_a, extent_b)
+        return big <= self.length[2] * (1.0 + tolerance) and small <= self.width[2] * (1.0 + tolerance) + 0.05
+
+
+#: Priors in ``CLASS_NAMES`` order. Nominal values: the apartment's instances (spec §5).
+CLASS_PRIORS: dict[str, ClassPrior] = {
+    p.name: p
+    for p in (
+        ClassPrior("ball", (0.14, 0.225, 0.32), (0.14, 0.225, 0.32), (0.14, 0.225, 0.34), solid_fraction=0.5),
+        ClassPrior(
+            "dog", (0.45, 0.95, 1.3), (0.15, 0.3, 0.55), (0.35, 0.7, 1.0), legged=True, leg_size_max=0.3
+        ),
+        ClassPrior("gnome", (0.14, 0.27, 0.45), (0.12, 0.21, 0.4), (0.3, 0.9, 1.2), solid_fraction=0.3),
+        ClassPrior(
+            "table", (0.7, 1.8, 2.3), (0.45, 1.0, 1.35), (0.45, 0.74, 1.0), legged=True, leg_size_max=0.3
+        ),
+        ClassPrior("chair", (0.45, 1.4, 2.3), (0.4, 1.0, 1.3), (0.45, 0.8, 1.3), solid_fraction=0.4),
+        ClassPrior(
+            "door", (0.6, 1.0, 1.3), (0.02, 0.1, 0.4), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True
+        ),
+        ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.08, 0.16), (0.05, 0.1, 0.16)),
+        ClassPrior(
+            "person", (0.25, 0.5, 0.8), (0.15, 0.3, 0.55), (1.2, 1.75, 2.1), legged=True, leg_size_max=0.3
+        ),
+        ClassPrior("extinguisher", (0.1, 0.2, 0.4), (0.08, 0.18, 0.35), (0.3, 0.7, 1.0), solid_fraction=0.3),
+        ClassPrior("flowers", (0.12, 0.3, 0.7), (0.12, 0.3, 0.7), (0.35, 0.95, 1.4), solid_fraction=0.1),
+        ClassPrior("shelf", (0.6, 1.0, 1.4), (0.25, 0.4, 0.7), (0.9, 2.2, 2.6), solid_fraction=0.5),
+    )
+}
+
+assert tuple(CLASS_PRIORS) == CLASS_NAMES, "class priors must follow CLASS_NAMES"
+
+
+def prior(label: str) -> ClassPrior:
+    """The prior of ``label``; an unknown label gets a permissive generic prior (never raises)."""
+    p = CLASS_PRIORS.get(label)
+    if p is not None:
+        return p
+    return ClassPrior(label, (0.05, 0.5, 3.0), (0.05, 0.4, 3.0), (0.05, 1.0, 3.0))

@@ -1,0 +1,188 @@
+"""World files: the apartment, YAML round trip, validation errors naming the entry, random worlds."""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from app.cli import main as cli_main
+from app.config import Config
+from app.ocslam.messages import CLASS_NAMES
+from app.worlds import (
+    ROBOT_RADIUS_M,
+    WorldError,
+    class_counts,
+    dump_world,
+    load_world,
+    random_world,
+    validate_world,
+    world_from_dict,
+    world_to_dict,
+)
+
+APARTMENT = Path("assets/worlds/apartment.yaml")
+
+
+@pytest.fixture(scope="module")
+def apartment_dict() -> dict:
+    return yaml.safe_load(APARTMENT.read_text())
+
+
+def test_apartment_has_all_classes_and_the_papers_layout():
+    w = load_world(APARTMENT)
+    counts = class_counts(w)
+    assert all(counts[c] >= 1 for c in CLASS_NAMES), counts
+    assert counts["door"] == 2 and counts["chair"] == 3
+    assert (w.start.x, w.start.y) == (-0.743, -1.199) and w.start.yaw == pytest.approx(-math.pi / 2)
+    xmin, ymin, xmax, ymax = w.bounds()
+    assert (xmin, ymin, xmax, ymax) == pytest.approx((-10.05, -6.75, 0.15, 0.15))
+    table = next(o for o in w.objects if o.label == "table")
+    xs, ys = table.footprint()[:, 0], table.footprint()[:, 1]
+    assert (xs.min(), xs.max(), ys.min(), ys.max()) == pytest.approx((-1.974, -0.174, -5.444, -4.444), abs=1e-3)
+    s1 = next(o for o in w.objects if o.name == "sofa S1")
+    fp = s1.footprint()
+    assert (fp[:, 0].min(), fp[:, 0].max(), fp[:, 1].min(), fp[:, 1].max()) == pytest.approx((-7.953, -6.153, -1.304, -0.304), abs=0.01)
+    assert "tour" in w.routes and len(w.routes["tour"]) >= 10
+
+
+def _load_dict(d: dict, tmp_path: Path, name: str = "w.yaml"):
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(d))
+    return load_world(p)
+
+
+def test_round_trip(tmp_path):
+    w = load_world(APARTMENT)
+    text = dump_world(w, tmp_path / "a.yaml")
+    w2 = load_world(tmp_path / "a.yaml")
+    assert world_to_dict(w2) == world_to_dict(w)
+    assert "yaw: 132.1" in text  # degrees in YAML
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda d: d["objects"][1].pop("x"), "objects[1] (class 'dog'): missing field 'x'"),
+        (lambda d: d["objects"][2].update({"class": "elf"}), "objects[2] (class 'elf'): unknown class 'elf'"),
+        (lambda d: d["objects"][2].update({"model": "garden_elf"}), "objects[2] (class 'gnome'): unknown model 'garden_elf'"),
+        (lambda d: d["objects"][1].update({"model": "table"}), "objects[1] (class 'dog'): model 'table' is of class 'table', not 'dog'"),
+        (lambda d: d["objects"][1].update({"y": -0.2}), "objects[1] (class 'dog', 'dog'): overlaps walls[0] ('north')"),
+        (lambda d: d["objects"][0].update({"x": -5.6, "y": -3.8}), "objects[9] (class 'chair', 'armchair'): overlaps objects[0] (class 'ball', 'ball')"),
+        (lambda d: d["objects"][0].update({"x": -1.97, "y": -0.6}), "objects[0] (class 'ball', 'ball'): overlaps obstacles[1] ('kitchen run')"),
+        (lambda d: d["start"].update({"x": -0.5, "y": -0.5}), "start: the robot at (-0.500, -0.500) overlaps obstacles[0] ('fridge')"),
+        (lambda d: d["routes"]["tour"].insert(3, [-3.3, -2.0]), "routes['tour'][3]: waypoint (-3.300, -2.000) is 0.000 m from walls[4] ('partition')"),
+        (lambda d: d["routes"]["tour"].insert(1, [-4.5, -1.0]), "routes['tour']: segment [0] → [1] passes 0.000 m from walls[4] ('partition')"),
+        (lambda d: d["objects"][3].update({"colour": [1, 0, 0]}), "objects[3] (class 'table'): unknown field(s) 'colour'"),
+        (lambda d: d["objects"][3].update({"color": [1, 0]}), "objects[3] (class 'table'): 'color': colour [1, 0]: expected [r, g, b] or '#rrggbb'"),
+        (lambda d: d["walls"][0]["openings"][0].update({"end": 11.0}), "walls[0] ('north').openings[0]: [7.9, 11.0] must lie within the wall"),
+        (lambda d: d["walls"][2].pop("to"), "walls[2]: missing field 'to'"),
+        (lambda d: d.pop("start"), "missing field 'start'"),
+        (lambda d: d["obstacles"][0].update({"model": "dog"}), "obstacles[0]: model 'dog' is of class 'dog'; put classified models under 'objects'"),
+        (lambda d: d["objects"][5].update({"scale": -1}), "objects[5] (class 'door'): 'scale' must be > 0"),
+    ],
+)
+def test_validation_errors_name_the_entry(apartment_dict, tmp_path, mutate, message):
+    d = copy.deepcopy(apartment_dict)
+    mutate(d)
+    with pytest.raises(WorldError) as e:
+        _load_dict(d, tmp_path)
+    assert message in str(e.value)
+    assert str(tmp_path / "w.yaml") in str(e.value)
+    assert isinstance(e.value, ValueError)
+
+
+def test_malformed_and_missing_files(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("walls: [\n  {from: [0, 0]\n")
+    with pytest.raises(WorldError, match="malformed YAML"):
+        load_world(bad)
+    with pytest.raises(WorldError, match="cannot read world file"):
+        load_world(tmp_path / "nope.yaml")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(WorldError, match="expected a mapping"):
+        load_world(tmp_path / "list.yaml")
+
+
+def test_door_fills_its_opening_but_not_a_solid_wall(apartment_dict, tmp_path):
+    d = copy.deepcopy(apartment_dict)
+    # move door D1 0.5 m along the west wall: half of it is now inside solid wall
+    d["objects"][4]["y"] = -4.45
+    with pytest.raises(WorldError, match=r"objects\[4\] \(class 'door', 'door D1'\): overlaps walls\[3\] \('west'\)"):
+        _load_dict(d, tmp_path)
+
+
+def test_random_world_is_valid_deterministic_and_varied():
+    a, b, c = random_world(11), random_world(11), random_world(12)
+    assert world_to_dict(a) == world_to_dict(b)
+    assert world_to_dict(a) != world_to_dict(c)
+    for w in (a, c):
+        validate_world(w)  # raises on any overlap or blocked route segment
+        counts = class_counts(w)
+        assert all(counts[k] >= 1 for k in CLASS_NAMES), counts
+        assert len(w.routes["tour"]) >= 3
+        colors = {o.color for o in w.objects if o.color is not None}
+        assert len(colors) >= 5
+
+
+def test_random_world_route_is_collision_free_in_the_simulator():
+    """Independent of the shapely check: the pybullet collision probe along every segment."""
+    from app.sim_world import SimWorld
+
+    w = random_world(5)
+    sim = SimWorld(w, Config(), seed=0)
+    try:
+        pts = [(w.start.x, w.start.y)] + list(w.routes["tour"])
+        checked = 0
+        for (x0, y0), (x1, y1) in zip(pts, pts[1:]):
+            n = max(2, int(math.hypot(x1 - x0, y1 - y0) / 0.05))
+            for t in np.linspace(0, 1, n):
+                assert sim.pose_free(x0 + t * (x1 - x0), y0 + t * (y1 - y0)), f"route blocked near ({x0:.2f}, {y0:.2f})"
+                checked += 1
+        assert checked > 50
+        # every room is visited: the route reaches at least 3 distinct rooms' worth of area
+        route = np.asarray(pts)
+        assert np.ptp(route[:, 0]) > 2.0 and np.ptp(route[:, 1]) > 1.5
+    finally:
+        sim.close()
+
+
+def test_world_from_dict_defaults():
+    w = world_from_dict(
+        {
+            "walls": [{"from": [0, 0], "to": [4, 0]}],
+            "objects": [{"class": "duck", "model": "rubber_duck", "x": 1, "y": 1}],
+            "start": {"x": 2, "y": 2},
+        }
+    )
+    assert w.walls[0].thickness == 0.15 and w.walls[0].height == 2.4
+    assert w.objects[0].yaw == 0.0 and w.objects[0].scale == 1.0 and w.start.yaw == 0.0
+    validate_world(w)
+    assert w.walls[0].solid_polygon().area == pytest.approx(4 * 0.15)
+
+
+def test_window_is_solid_at_lidar_height_and_door_opening_is_not(tmp_path):
+    w = load_world(APARTMENT)
+    east = w.walls[1]
+    assert east.solid_polygon(0.173).area == pytest.approx(east.polygon().area)
+    assert east.solid_polygon(1.5).area < east.polygon().area - 0.25
+    west = w.walls[3]
+    assert west.solid_polygon(0.173).area == pytest.approx(west.polygon().area - 1.0 * 0.3)
+
+
+def test_cli_random_and_validate(tmp_path, capsys):
+    out = tmp_path / "r.yaml"
+    assert cli_main(["world", "random", "--seed", "3", "--out", str(out)]) == 0
+    assert cli_main(["world", "validate", str(out), str(APARTMENT)]) == 0
+    text = capsys.readouterr().out
+    assert "OK" in text and "tour" in text
+    d = yaml.safe_load(out.read_text())
+    d["objects"][0]["class"] = "unicorn"
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(d))
+    assert cli_main(["world", "validate", str(tmp_path / "bad.yaml")]) == 2
+    assert "unknown class 'unicorn'" in capsys.readouterr().err
+    assert ROBOT_RADIUS_M == Config().robot.footprint_radius_m

@@ -95,11 +95,11 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ),
         ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.08, 0.16), (0.05, 0.1, 0.16)),
         ClassPrior(
-            "person", (0.25, 0.5, 0.8), (0.15, 0.3, 0.55), (1.2, 1.75, 2.1), legged=True, leg_size_max=0.3
+            "person", (0.25, 0.5, 0.8), (0.15, 0.3, 0.55), (1.2, 1.75, 2.3), legged=True, leg_size_max=0.3
         ),
         ClassPrior("extinguisher", (0.1, 0.2, 0.4), (0.08, 0.18, 0.35), (0.3, 0.7, 1.0), solid_fraction=0.3),
         ClassPrior("flowers", (0.12, 0.3, 0.7), (0.12, 0.3, 0.7), (0.35, 0.95, 1.4), solid_fraction=0.1),
-        ClassPrior("shelf", (0.6, 1.0, 1.4), (0.25, 0.4, 0.7), (0.9, 2.2, 2.6), solid_fraction=0.5),
+        ClassPrior("shelf", (0.6, 1.0, 1.4), (0.25, 0.4, 0.7), (0.9, 2.2, 2.9), solid_fraction=0.5),
     )
 }
 

@@ -252,3 +252,24 @@ class ConsciousnessConfig:
     ground_plane: bool = param(True, help="improved: place objects with no island by ground-plane ranging", live=True)
     ghost_decay: bool = param(True, help="improved: decay presence of objects in view but not detected", live=True)
     sync_tolerance_s: float = param(0.1, min=0.0, max=2.0, unit="s", help="improved: max image/scan stamp gap")
+    range_tolerance: float = param(
+        0.25, min=0.0, max=2.0, step=0.01, help="improved: relative slack of the near range given by the box's bottom edge", live=True
+    )
+    bottom_margin_px: float = param(
+        6.0, min=0.0, max=100.0, step=1.0, unit="px", help="improved: bottom-edge uncertainty used for the near range", live=True
+    )
+    ground_plane_max_range_m: float = param(
+        3.0, min=0.2, max=10.0, step=0.1, unit="m", help="improved: farthest ground-plane placement", live=True
+    )
+    decay_max_range_m: float = param(
+        2.5, min=0.2, max=20.0, step=0.1, unit="m", help="improved: ghost decay only for objects nearer than this", live=True
+    )
+    occlusion_margin_m: float = param(
+        0.2, min=0.0, max=2.0, step=0.01, unit="m", help="improved: LIDAR returns this much in front of an object occlude it", live=True
+    )
+    overlap_fraction: float = param(
+        0.3, min=0.0, max=1.0, step=0.05, help="improved: footprints overlapping by this share of the smaller one collide", live=True
+    )
+    stationary_frame_s: float = param(
+        1.0, min=0.0, max=60.0, step=0.1, unit="s", help="improved: while the robot stands still, count a new frame after this time", live=True
+    )

@@ -367,8 +367,8 @@ def area_from_box(
     b_left, b_right, b_center = (float(b) for b in bearings)
     rows = np.array([[xc, y2], [xc, min(y2 + bottom_margin_px, H)], [xc, max(y2 - bottom_margin_px, 0.0)]])
     near, near_lo, near_hi = (float(r) for r in camera.ground_ranges(rows))
-    if truncated["bottom"]:
-        near_lo = 0.0
+    if truncated["bottom"] or not np.isfinite(near_lo):
+        near_lo = 0.0  # the floor contact is not visible: no lower bound
     near_lo = min(near_lo, max_range_m)
     apex = camera.apex_scan
     r_poly = near_lo if np.isfinite(near_lo) else 0.0
@@ -446,7 +446,8 @@ def assign_points(
     Containment uses ``shapely.contains_xy`` (vectorised per area). With ``exclusive`` (improved mode)
     a point inside several areas goes to one only: the area whose expected range (its near range
     from the bottom edge, ``[near_lo·(1−tol), near_hi·(1+tol)]``) explains the point best; on a tie
-    the area nearest the camera (smallest near range), then the one whose bisector is closest.
+    the area nearest the camera (smallest near range), then the one whose bisector is closest, then
+    the higher confidence.
     Without ``exclusive`` (seed mode) a point may belong to several areas.
     """
     pts = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2)
@@ -474,7 +475,7 @@ def assign_points(
         # Range mismatch dominates; then the nearest area; then the bisector's angular offset.
         near = area.near_range_m if np.isfinite(area.near_range_m) else 1e3
         off = np.abs(area.angular_offsets(sub))
-        c = outside / np.maximum(r, 0.1) * 1e6 + near * 1e2 + off
+        c = outside / np.maximum(r, 0.1) * 1e6 + near * 1e2 + off - 1e-6 * area.confidence
         cost[:, k] = np.where(inside[rows, k], c, np.inf)
     best = np.argmin(cost, axis=1)
     inside[rows] = False

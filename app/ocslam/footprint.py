@@ -1,0 +1,427 @@
+"""An object's accumulated evidence and the footprint estimated from it (improved mode).
+
+Every observation of an object adds:
+
+- its island points (voxel-downsampled; ``hits`` counts how often a voxel was seen),
+- the *bisector ray* of its box (apex and direction on the floor plane): the object's centre lies near
+  it (the paper's assumption 2); rays of boxes cut by the image border only count as viewpoints,
+- for objects the LIDAR cannot see, a ground-plane centre (rolling average, the paper's 90 % weight).
+
+All of it is stored in the object frame (``map``) tagged with the SLAM keyframe it was seen from, so a
+loop-closure correction moves every piece rigidly with its keyframe (:meth:`ObjectEvidence.transform`).
+
+The footprint (:func:`estimate_footprint`) is the minimum-area rectangle of the points, completed to
+the class's size on the sides the robot never saw (a sofa seen from the front is as deep as a sofa),
+positioned where the bisector rays cross (least squares) inside the range the points allow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from shapely.geometry import MultiPoint, Polygon
+
+from app.ocslam.classes import ClassPrior
+from app.ocslam.se2 import Pose2
+
+FloatArray = NDArray[np.float64]
+NO_KEYFRAME = -1
+
+
+@dataclass
+class Footprint:
+    """An oriented rectangle: ``center`` (2,), ``yaw`` (rad, axis of ``size_x``), sizes (m)."""
+
+    center: FloatArray
+    yaw: float
+    size_x: float
+    size_y: float
+
+    @property
+    def corners(self) -> FloatArray:
+        """(4, 2) counter-clockwise corners."""
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        hx, hy = self.size_x / 2.0, self.size_y / 2.0
+        local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+        R = np.array([[c, -s], [s, c]])
+        return local @ R.T + self.center[None, :]
+
+    @property
+    def polygon(self) -> Polygon:
+        return Polygon(self.corners)
+
+    @property
+    def area(self) -> float:
+        return float(self.size_x * self.size_y)
+
+    def contains(self, points: FloatArray, margin: float = 0.0) -> NDArray[np.bool_]:
+        """``(N, 2)`` points → inside the rectangle grown by ``margin`` on every side."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2) - self.center[None, :]
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        lx = c * p[:, 0] + s * p[:, 1]
+        ly = -s * p[:, 0] + c * p[:, 1]
+        return (np.abs(lx) <= self.size_x / 2 + margin) & (np.abs(ly) <= self.size_y / 2 + margin)
+
+    def nearest_distance(self, point: FloatArray) -> float:
+        """Distance from a (2,) point to the rectangle (0 inside)."""
+        p = np.asarray(point, dtype=np.float64) - self.center
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        lx, ly = c * p[0] + s * p[1], -s * p[0] + c * p[1]
+        dx = max(abs(lx) - self.size_x / 2, 0.0)
+        dy = max(abs(ly) - self.size_y / 2, 0.0)
+        return float(np.hypot(dx, dy))
+
+    def transformed(self, T: Pose2) -> "Footprint":
+        c = T.transform_points(self.center[None, :])[0]
+        return Footprint(c, float(self.yaw + T.yaw), self.size_x, self.size_y)
+
+
+def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
+    """Minimum-area enclosing rectangle of ``(N, 2)`` points (rotating calipers over the hull edges).
+
+    Returns ``(theta, lo (2,), hi (2,))``: the rectangle's first axis angle and the points' extents along
+    ``e1 = (cos θ, sin θ)`` and ``e2 = (−sin θ, cos θ)``.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    hull = MultiPoint(p).convex_hull
+    if isinstance(hull, Polygon):
+        ring = np.asarray(hull.exterior.coords)
+        edges = np.diff(ring, axis=0)
+        thetas = np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2)
+        hp = ring[:-1]
+    elif hull.geom_type == "LineString":
+        ring = np.asarray(hull.coords)
+        d = ring[-1] - ring[0]
+        thetas = np.array([np.arctan2(d[1], d[0])])
+        hp = ring
+    else:
+        thetas = np.array([0.0])
+        hp = p[:1]
+    thetas = np.unique(np.round(thetas, 9))
+    c, s = np.cos(thetas), np.sin(thetas)
+    a = hp[None, :, 0] * c[:, None] + hp[None, :, 1] * s[:, None]
+    b = -hp[None, :, 0] * s[:, None] + hp[None, :, 1] * c[:, None]
+    areas = (a.max(1) - a.min(1)) * (b.max(1) - b.min(1))
+    k = int(np.argmin(areas))
+    th = float(thetas[k])
+    c, s = np.cos(th), np.sin(th)
+    a = p[:, 0] * c + p[:, 1] * s
+    b = -p[:, 0] * s + p[:, 1] * c
+    return th, np.array([a.min(), b.min()]), np.array([a.max(), b.max()])
+
+
+def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
+    """argmin ``½ sᵀHs − gᵀs`` over the box ``lo ≤ s ≤ hi`` (2D, H positive definite)."""
+    s = np.linalg.solve(H, g)
+    if np.all(s >= lo - 1e-12) and np.all(s <= hi + 1e-12):
+        return s
+
+    def f(x: FloatArray) -> float:
+        return float(0.5 * x @ H @ x - g @ x)
+
+    cands = []
+    for i in range(2):
+        j = 1 - i
+        for v in (lo[i], hi[i]):
+            # fix s_i = v, minimise over s_j
+            sj = (g[j] - H[j, i] * v) / H[j, j]
+            x = np.empty(2)
+            x[i], x[j] = v, np.clip(sj, lo[j], hi[j])
+            cands.append(x)
+    return min(cands, key=f)
+
+
+class ObjectEvidence:
+    """What one tracked object has accumulated: points, bisector rays and ground-plane centres.
+
+    Arrays are in the object frame (``map``); each entry carries the keyframe it was seen from.
+    """
+
+    def __init__(self, voxel_m: float = 0.03, max_points: int = 800, max_rays: int = 48) -> None:
+        self.voxel_m = voxel_m
+        self.max_points = max_points
+        self.max_rays = max_rays
+        self.points = np.zeros((0, 2))
+        self.hits = np.zeros(0, dtype=np.int64)
+        self.point_kf = np.zeros(0, dtype=np.int64)
+        self.ray_origin = np.zeros((0, 2))
+        self.ray_dir = np.zeros((0, 2))
+        self.ray_weight = np.zeros(0)
+        self.ray_kf = np.zeros(0, dtype=np.int64)
+        self.ray_app = np.zeros(0)  # apparent width seen along each ray (m), NaN if unknown
+        self.gp_center: FloatArray | None = None
+        self.gp_kf: int = NO_KEYFRAME
+
+    # -- accumulation ----------------------------------------------------------------------------
+    @property
+    def has_points(self) -> bool:
+        return len(self.points) > 0
+
+    def add_points(self, points: FloatArray, kf: int = NO_KEYFRAME) -> None:
+        """Add ``(N, 2)`` points (object frame), merging them into voxels of ``voxel_m``."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        p = p[np.all(np.isfinite(p), axis=1)]
+        if len(p) == 0:
+            return
+        # existing voxel means carry their hit counts as weights
+        w = np.concatenate([self.hits, np.ones(len(p), dtype=np.int64)]).astype(np.float64)
+        pos = np.vstack([self.points, p]) if len(self.points) else p
+        kfs = np.concatenate([self.point_kf, np.full(len(p), kf, dtype=np.int64)])
+        keys = np.floor(pos / self.voxel_m).astype(np.int64)
+        _, inv = np.unique(keys, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        n = int(inv.max()) + 1
+        wsum = np.bincount(inv, weights=w, minlength=n)
+        sx = np.bincount(inv, weights=pos[:, 0] * w, minlength=n)
+        sy = np.bincount(inv, weights=pos[:, 1] * w, minlength=n)
+        kf_out = np.full(n, NO_KEYFRAME, dtype=np.int64)
+        np.maximum.at(kf_out, inv, kfs)
+        self.points = np.stack([sx / wsum, sy / wsum], axis=1)
+        self.hits = np.rint(wsum).astype(np.int64)
+        self.point_kf = kf_out
+        if len(self.points) > self.max_points:
+            keep = np.argsort(-self.hits, kind="stable")[: self.max_points]
+            keep.sort()
+            self.points, self.hits, self.point_kf = self.points[keep], self.hits[keep], self.point_kf[keep]
+
+    def add_ray(
+        self,
+        origin: FloatArray,
+        direction: FloatArray,
+        weight: float,
+        kf: int = NO_KEYFRAME,
+        decay: float = 1.0,
+        apparent_width: float = float("nan"),
+    ) -> None:
+        """Add a bisector ray (object frame); older rays' weights are multiplied by ``decay`` first.
+
+        ``apparent_width``: the object's width across the ray as the box shows it (m), NaN if unknown.
+        """
+        d = np.asarray(direction, dtype=np.float64)
+        n = float(np.linalg.norm(d))
+        o = np.asarray(origin, dtype=np.float64)
+        if n < 1e-12 or not np.all(np.isfinite(o)) or not np.isfinite(n):
+            return
+        d = d / n
+        self.ray_weight = self.ray_weight * decay
+        self.ray_origin = np.vstack([self.ray_origin, o[None, :]])
+        self.ray_dir = np.vstack([self.ray_dir, d[None, :]])
+        self.ray_weight = np.append(self.ray_weight, float(weight))
+        self.ray_kf = np.append(self.ray_kf, int(kf))
+        self.ray_app = np.append(self.ray_app, float(apparent_width))
+        if len(self.ray_weight) > self.max_rays:
+            # keep the viewpoints spread out: drop the older ray of the closest pair of origins
+            o_all = self.ray_origin
+            d2 = np.sum((o_all[:, None, :] - o_all[None, :, :]) ** 2, axis=-1)
+            d2[np.tril_indices(len(o_all))] = np.inf
+            i, _j = np.unravel_index(np.argmin(d2), d2.shape)
+            keep = np.ones(len(o_all), dtype=bool)
+            keep[i] = False
+            self.ray_origin, self.ray_dir = self.ray_origin[keep], self.ray_dir[keep]
+            self.ray_weight, self.ray_kf, self.ray_app = self.ray_weight[keep], self.ray_kf[keep], self.ray_app[keep]
+
+    def add_ground_center(self, center: FloatArray, weight_old: float, kf: int = NO_KEYFRAME) -> None:
+        """Rolling average of ground-plane centres: ``c ← w·c + (1 − w)·new`` (paper's 90 %)."""
+        c = np.asarray(center, dtype=np.float64).reshape(2)
+        if not np.all(np.isfinite(c)):
+            return
+        self.gp_center = c.copy() if self.gp_center is None else weight_old * self.gp_center + (1.0 - weight_old) * c
+        self.gp_kf = int(kf)
+
+    def absorb(self, other: "ObjectEvidence") -> None:
+        """Merge another object's evidence into this one (same class, same object)."""
+        if other.has_points:
+            for k in np.unique(other.point_kf):
+                m = other.point_kf == k
+                # repeat points by hits to keep their weight
+                self.add_points(np.repeat(other.points[m], other.hits[m], axis=0), int(k))
+        for o, d, w, k, a in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app):
+            self.add_ray(o, d, float(w), int(k), apparent_width=float(a))
+        if other.gp_center is not None:
+            if self.gp_center is None:
+                self.gp_center, self.gp_kf = other.gp_center.copy(), other.gp_kf
+            else:
+                self.gp_center = 0.5 * (self.gp_center + other.gp_center)
+
+    # -- corrections -----------------------------------------------------------------------------
+    def transform(self, deltas: dict[int, Pose2]) -> None:
+        """Move every piece seen from keyframe ``k`` by ``deltas[k]`` (``T_map_kf_new ∘ T_map_kf_old⁻¹``)."""
+        for k, T in deltas.items():
+            m = self.point_kf == k
+            if np.any(m):
+                self.points[m] = T.transform_points(self.points[m])
+            m = self.ray_kf == k
+            if np.any(m):
+                self.ray_origin[m] = T.transform_points(self.ray_origin[m])
+                c, s = np.cos(T.yaw), np.sin(T.yaw)
+                d = self.ray_dir[m]
+                self.ray_dir[m] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
+            if self.gp_center is not None and self.gp_kf == k:
+                self.gp_center = T.transform_points(self.gp_center[None, :])[0]
+
+    def latest_keyframe(self) -> int:
+        ks = [int(self.point_kf.max()) if len(self.point_kf) else NO_KEYFRAME]
+        ks.append(int(self.ray_kf.max()) if len(self.ray_kf) else NO_KEYFRAME)
+        ks.append(self.gp_kf)
+        return max(ks)
+
+    # -- (de)serialisation -----------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {
+            "voxel_m": self.voxel_m,
+            "points": self.points.tolist(),
+            "hits": self.hits.tolist(),
+            "point_kf": self.point_kf.tolist(),
+            "ray_origin": self.ray_origin.tolist(),
+            "ray_dir": self.ray_dir.tolist(),
+            "ray_weight": self.ray_weight.tolist(),
+            "ray_kf": self.ray_kf.tolist(),
+            "ray_app": [None if not np.isfinite(a) else float(a) for a in self.ray_app],
+            "gp_center": None if self.gp_center is None else self.gp_center.tolist(),
+            "gp_kf": self.gp_kf,
+        }
+
+    @staticmethod
+    def from_state_dict(d: dict) -> "ObjectEvidence":
+        e = ObjectEvidence(voxel_m=float(d.get("voxel_m", 0.03)))
+        e.points = np.asarray(d.get("points", []), dtype=np.float64).reshape(-1, 2)
+        e.hits = np.asarray(d.get("hits", []), dtype=np.int64).reshape(-1)
+        e.point_kf = np.asarray(d.get("point_kf", []), dtype=np.int64).reshape(-1)
+        e.ray_origin = np.asarray(d.get("ray_origin", []), dtype=np.float64).reshape(-1, 2)
+        e.ray_dir = np.asarray(d.get("ray_dir", []), dtype=np.float64).reshape(-1, 2)
+        e.ray_weight = np.asarray(d.get("ray_weight", []), dtype=np.float64).reshape(-1)
+        e.ray_kf = np.asarray(d.get("ray_kf", []), dtype=np.int64).reshape(-1)
+        app = d.get("ray_app")
+        e.ray_app = (
+            np.full(len(e.ray_kf), np.nan)
+            if app is None
+            else np.array([np.nan if a is None else float(a) for a in app], dtype=np.float64)
+        )
+        gp = d.get("gp_center")
+        e.gp_center = None if gp is None else np.asarray(gp, dtype=np.float64).reshape(2)
+        e.gp_kf = int(d.get("gp_kf", NO_KEYFRAME))
+        if not (len(e.points) == len(e.hits) == len(e.point_kf)) or not (
+            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app)
+        ):
+            raise ValueError("object evidence: array lengths differ")
+        return e
+
+
+def _one_sided(viewpoints: FloatArray, center: FloatArray, axis: FloatArray, half: float) -> int:
+    """+1/−1 if every viewpoint outside the slab ``|(v − c)·axis| ≤ half`` is on that side, else 0."""
+    if len(viewpoints) == 0:
+        return 0
+    s = (viewpoints - center[None, :]) @ axis
+    out = s[np.abs(s) > half + 0.05]
+    if len(out) == 0:
+        return 0
+    if np.all(out > 0):
+        return 1
+    if np.all(out < 0):
+        return -1
+    return 0
+
+
+def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: float = 1.0) -> Footprint | None:
+    """The object's footprint from its evidence and class prior (object frame). ``None`` if no evidence."""
+    L, W = pc.length, pc.width
+    if not ev.has_points:
+        if ev.gp_center is None:
+            return None
+        yaw = 0.0
+        if len(ev.ray_dir):
+            d = ev.ray_dir[-1]
+            yaw = float(np.arctan2(d[1], d[0]) + np.pi / 2)
+        return Footprint(ev.gp_center.copy(), yaw, L[1], W[1])
+
+    th, lo, hi = min_area_rect(ev.points)
+    axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
+    d_obs = hi - lo
+    mid = 0.5 * (lo + hi)
+    center0 = axes.T @ mid
+    views = ev.ray_origin
+    side = [_one_sided(views, center0, axes[i], d_obs[i] / 2) for i in range(2)]
+    # the depth axis is the one most aligned with the viewing directions; the other is tangential
+    depth_axis = -1
+    if len(views):
+        u = center0[None, :] - views
+        u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
+        depth_axis = int(np.argmax(np.abs(u @ axes.T).mean(axis=0)))
+
+    # the box's apparent width, seen along the depth axis, measures the tangential extent
+    tan_axis = 1 - depth_axis if depth_axis >= 0 else -1
+    w_app = float("nan")
+    if tan_axis >= 0 and len(ev.ray_app):
+        along = np.abs(ev.ray_dir @ axes[depth_axis]) > 0.85
+        vals = ev.ray_app[along & np.isfinite(ev.ray_app)]
+        if len(vals):
+            w_app = float(np.median(vals))
+    tan_complete = tan_axis >= 0 and np.isfinite(w_app) and d_obs[tan_axis] >= 0.75 * w_app
+
+    # which rectangle axis is the object's length, which its width
+    a = int(np.argmax(d_obs))
+    dims: list[tuple[float, float, float]] = [W, W]
+    dims[a], dims[1 - a] = L, W
+    if tan_axis >= 0 and side[depth_axis] != 0 and np.isfinite(w_app):
+        # seen face-on: the face is the length or the width, whichever its apparent width is closer to
+        tan_is_length = abs(w_app - L[1]) <= abs(w_app - W[1])
+        if w_app > W[2] * 1.1:
+            tan_is_length = True
+        dims[tan_axis], dims[depth_axis] = (L, W) if tan_is_length else (W, L)
+
+    # feasible interval of the centre along each axis (rectangle coordinates) and the prior's weight
+    s_lo, s_hi, s_prior, size, lam = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.ones(2)
+    for i in range(2):
+        dmin, dnom, dmax = dims[i]
+        if d_obs[i] > dmax * 1.15:
+            # over-extended evidence (background points): the object is somewhere inside it
+            size[i] = dmax
+            s_lo[i], s_hi[i] = lo[i] + dmax / 2, hi[i] - dmax / 2
+            w = ev.hits.astype(np.float64)
+            proj = ev.points @ axes[i]
+            s_prior[i] = float(np.clip(np.sum(proj * w) / max(np.sum(w), 1e-9), s_lo[i], s_hi[i]))
+        elif (i == tan_axis and tan_complete) or (i != tan_axis and d_obs[i] >= dnom) or (i == depth_axis and side[i] == 0):
+            size[i] = max(d_obs[i], dmin)
+            slack = 0.05 * d_obs[i] + 0.01
+            s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
+            s_prior[i] = mid[i]
+        elif i == depth_axis:
+            # seen from one side only: the object extends away from the robot up to its class size
+            sgn = side[i]
+            face = hi[i] if sgn > 0 else lo[i]
+            t_nom, t_min, t_max = max(d_obs[i], dnom), max(d_obs[i], dmin), max(d_obs[i], dmax)
+            size[i] = t_nom
+            c_min, c_max = face - sgn * t_min / 2, face - sgn * t_max / 2
+            s_lo[i], s_hi[i] = min(c_min, c_max), max(c_min, c_max)
+            s_prior[i] = face - sgn * t_nom / 2
+        else:
+            # tangential and incomplete (occluded, or legs): the object spans the observed part and at most
+            # its size; the bisector rays decide where
+            t_est = float(np.clip(w_app, dmin, dmax)) if np.isfinite(w_app) else dnom
+            t_max = max(d_obs[i], min(dmax, t_est * 1.25) if np.isfinite(w_app) else dmax)
+            size[i] = max(d_obs[i], t_est)
+            s_lo[i], s_hi[i] = hi[i] - t_max / 2, lo[i] + t_max / 2
+            s_prior[i] = mid[i]
+            lam[i] = 0.1
+
+    # least squares: the centre near every weighted bisector ray, regularised towards the prior
+    H = ray_prior_weight * np.diag(lam)
+    g = ray_prior_weight * lam * s_prior
+    wts = ev.ray_weight
+    use = wts > 1e-6
+    if np.any(use):
+        n_world = np.stack([-ev.ray_dir[use, 1], ev.ray_dir[use, 0]], axis=1)
+        n_rect = n_world @ axes.T  # normals in rectangle coordinates
+        o_rect = ev.ray_origin[use] @ axes.T
+        w = wts[use]
+        H = H + (n_rect * w[:, None]).T @ n_rect
+        g = g + (n_rect * (w * np.sum(n_rect * o_rect, axis=1))[:, None]).sum(axis=0)
+    s = _box_qp(H, g, s_lo, s_hi)
+    # the rectangle must still cover the observed points (unless they are over-extended)
+    for i in range(2):
+        if d_obs[i] <= dims[i][2] * 1.15:
+            size[i] = max(size[i], 2.0 * max(s[i] - lo[i], hi[i] - s[i]))
+    center = axes.T @ s
+    return Footprint(center, th, float(size[0]), float(size[1]))

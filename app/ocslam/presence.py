@@ -1,0 +1,94 @@
+"""Soft decision (paper §2.5.4) and ghost decay.
+
+Presence confidence: ``X_p0 = c/F``; on each new frame in which the object is seen again,
+``X_f ← min(X_f + 1, F)`` then ``X_p ← max(X_p, Y_c·X_f/F)`` (the implementation's order and cap;
+the paper's text increments after and without a cap, which would let ``X_p`` exceed 1).
+
+Ghost decay (improved mode): an object whose position is in the camera's view, within range and not
+occluded according to the LIDAR, but that no box of its class explains, loses
+``decay_rate_per_s · dt`` of presence. Occluded objects keep theirs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from app.ocslam.footprint import Footprint
+from app.ocslam.projection import CameraModel
+from app.ocslam.se2 import Pose2
+
+FloatArray = NDArray[np.float64]
+
+
+def initial_presence(confidence: float, frames_for_presence: int) -> float:
+    """``X_p0 = c / F``."""
+    return float(np.clip(confidence, 0.0, 1.0)) / max(int(frames_for_presence), 1)
+
+
+def update_presence(presence: float, frames: int, confidence: float, frames_for_presence: int) -> tuple[float, int]:
+    """One new frame: ``f ← min(f + 1, F)``, ``p ← max(p, c·f/F)``. Returns ``(p, f)``."""
+    F = max(int(frames_for_presence), 1)
+    f = min(int(frames) + 1, F)
+    p = max(float(presence), float(np.clip(confidence, 0.0, 1.0)) * f / F)
+    return p, f
+
+
+def decay_presence(presence: float, rate_per_s: float, dt: float) -> float:
+    """Presence after ``dt`` seconds of being in view but not detected (never below 0)."""
+    return max(0.0, float(presence) - max(rate_per_s, 0.0) * max(dt, 0.0))
+
+
+def in_camera_view(
+    footprint: Footprint,
+    height_m: float,
+    T_frame_base: Pose2,
+    camera: CameraModel,
+    max_range_m: float,
+    margin_frac: float = 0.08,
+) -> bool:
+    """True if the object's centre (at mid-height, capped at 1 m) projects inside the image's inner part
+    and lies within ``max_range_m`` of the camera (horizontally)."""
+    c_base = T_frame_base.inverse().transform_points(footprint.center[None, :])[0]
+    z = float(np.clip(0.5 * height_m, 0.02, 1.0))
+    uv, depth = camera.project(np.array([[c_base[0], c_base[1], z]]))
+    if not depth[0] > 0.05:
+        return False
+    u, v = uv[0]
+    W, H = camera.info.width, camera.info.height
+    if not (margin_frac * W <= u <= (1.0 - margin_frac) * W and 0.0 <= v <= H):
+        return False
+    return float(np.hypot(*(c_base - camera.center_base[:2]))) <= max_range_m
+
+
+def occluded_by_scan(
+    footprint: Footprint,
+    T_frame_scan: Pose2,
+    beam_bearings: FloatArray,
+    beam_ranges: FloatArray,
+    margin_m: float,
+) -> bool:
+    """True if the LIDAR sees something at least ``margin_m`` in front of the object over most of it.
+
+    ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return).
+    """
+    corners = T_frame_scan.inverse().transform_points(np.vstack([footprint.corners, footprint.center[None, :]]))
+    b = np.arctan2(corners[:, 1], corners[:, 0])
+    rel = (b - b[-1] + np.pi) % (2 * np.pi) - np.pi
+    lo, hi = b[-1] + rel.min(), b[-1] + rel.max()
+    # shrink to the central half so the object's own outline does not count
+    mid, half = 0.5 * (lo + hi), 0.25 * (hi - lo)
+    off = (beam_bearings - mid + np.pi) % (2 * np.pi) - np.pi
+    sel = np.abs(off) <= max(half, 0.6 * np.deg2rad(1.0))
+    if not np.any(sel):
+        sel = np.zeros(len(off), dtype=bool)
+        if len(off):
+            sel[np.argmin(np.abs(off))] = True
+    if not np.any(sel):
+        return False
+    fp_scan = footprint.transformed(T_frame_scan.inverse())
+    r_obj = fp_scan.nearest_distance(np.zeros(2))
+    if r_obj <= 0.0:
+        return False
+    blocked = beam_ranges[sel] < r_obj - margin_m
+    return bool(np.mean(blocked) > 0.5)

@@ -1,0 +1,376 @@
+"""Frontier-based autonomous exploration.
+
+:class:`FrontierExplorer` picks where to go: every frontier cluster (:mod:`.frontiers`) gets an *approach
+cell*, the reachable unblocked cell within ``approach_radius_m`` of one of its cells with the cheapest
+path from the robot (one Dijkstra search ranks them all). Its cost is ``path cost − gain_weight ×
+frontier length``; the cheapest wins. Frontiers without a reachable approach cell (behind walls, in
+narrow gaps, outside the apartment seen through an opening too small for the robot) are skipped, and
+so are approach cells near blacklisted points (goals that failed or were reached without clearing
+their frontier). Unknown cells may be crossed at ``unknown_cost`` times the normal cost, so frontiers
+in the middle of big rooms (beyond the LIDAR's range) are handled like any other.
+
+Hysteresis: the current goal is kept while it stays valid (still next to a frontier, reachable, not
+blacklisted) unless another frontier becomes cheaper by more than ``switch_margin_m``.
+
+:class:`ExplorationController` drives the loop: it asks the explorer for a goal whenever the map
+changes (at most every ``replan_period_s``), follows the path with a :class:`~.follower.PathFollower`,
+blacklists goals it cannot reach (no progress, blocked too often) and declares exploration done when
+no reachable frontier is left on several consecutive maps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from app.ocslam.config import RobotConfig
+from app.ocslam.messages import LaserScan, OccupancyGrid, Twist
+from app.ocslam.navigation.astar import cost_to_go, extract_path, local_to_xy, smooth_path
+from app.ocslam.navigation.costmap import OCCUPIED_THRESHOLD, CostMap, build_costmap
+from app.ocslam.navigation.follower import ARRIVED, BLOCKED, PathFollower
+from app.ocslam.navigation.frontiers import FRONTIER_FREE_THRESHOLD, Frontier, frontiers_from_labels, label_frontiers
+from app.ocslam.se2 import Pose2
+
+
+class FrontierExplorer:
+    """Choose the next exploration goal on the SLAM grid (all points in the ``map`` frame)."""
+
+    def __init__(
+        self,
+        robot_radius_m: float,
+        *,
+        min_frontier_size: int = 5,
+        blacklist_radius_m: float = 0.5,
+        approach_radius_m: float | None = None,
+        gain_weight: float = 0.5,
+        unknown_cost: float = 3.0,
+        switch_margin_m: float = 1.0,
+        keep_slack_m: float = 0.3,
+        goal_clearance_m: float = 0.12,
+        clearance_m: float = 0.3,
+        clearance_weight: float = 3.0,
+        occupied_threshold: int = OCCUPIED_THRESHOLD,
+        free_threshold: int = FRONTIER_FREE_THRESHOLD,
+    ) -> None:
+        self.robot_radius_m = float(robot_radius_m)
+        self.min_frontier_size = int(min_frontier_size)
+        self.blacklist_radius_m = float(blacklist_radius_m)
+        self.approach_radius_m = float(
+            approach_radius_m if approach_radius_m is not None else max(0.3, 2.5 * robot_radius_m)
+        )
+        self.gain_weight = float(gain_weight)
+        self.unknown_cost = float(unknown_cost)
+        self.switch_margin_m = float(switch_margin_m)
+        self.keep_slack_m = float(keep_slack_m)
+        self.goal_clearance_m = float(goal_clearance_m)
+        self.clearance_m = float(clearance_m)
+        self.clearance_weight = float(clearance_weight)
+        self.occupied_threshold = int(occupied_threshold)
+        self.free_threshold = int(free_threshold)
+        self.blacklist: list[NDArray[np.float64]] = []
+        self.virtual_obstacles: list[NDArray[np.float64]] = []  # (K, 2) point sets, map frame
+        self.goal_xy: NDArray[np.float64] | None = None
+        self.path: NDArray[np.float64] | None = None
+        self.frontiers: list[Frontier] = []  # the last call's frontiers (for drawing)
+        self.goal_frontier: Frontier | None = None
+
+    # -- bookkeeping ---------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the blacklist, the virtual obstacles and the current goal."""
+        self.blacklist.clear()
+        self.virtual_obstacles.clear()
+        self.goal_xy = None
+        self.path = None
+        self.goal_frontier = None
+
+    def mark_failed(self, goal_xy: ArrayLike | None = None) -> None:
+        """Blacklist ``goal_xy`` (default: the current goal): approach cells within
+        ``blacklist_radius_m`` of it are never chosen again."""
+        g = self.goal_xy if goal_xy is None else np.asarray(goal_xy, dtype=np.float64).reshape(2)
+        if g is not None and np.isfinite(g).all():
+            self.blacklist.append(np.array(g, dtype=np.float64))
+        if goal_xy is None or (self.goal_xy is not None and np.allclose(g, self.goal_xy)):
+            self.goal_xy = None
+            self.path = None
+            self.goal_frontier = None
+
+    def add_virtual_obstacle(self, points_xy: ArrayLike) -> None:
+        """Treat the cells of ``(K, 2)`` map-frame points as occupied from now on (until :meth:`reset`)."""
+        p = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+        p = p[np.isfinite(p).all(axis=1)]
+        if len(p):
+            self.virtual_obstacles.append(p)
+
+    def mark_reached(self, goal_xy: ArrayLike | None = None) -> None:
+        """The robot reached the goal: if its frontier is still there it cannot be cleared from this
+        spot, so the spot is blacklisted like a failure."""
+        self.mark_failed(goal_xy)
+
+    # -- goal selection ------------------------------------------------------------------------
+    def _costmap(self, grid: OccupancyGrid, robot_xy: NDArray[np.float64]) -> CostMap:
+        return build_costmap(
+            grid,
+            self.robot_radius_m,
+            start_xy=robot_xy,
+            occupied_threshold=self.occupied_threshold,
+            unknown_is_obstacle=False,
+            unknown_cost=self.unknown_cost,
+            clearance_m=self.clearance_m,
+            clearance_weight=self.clearance_weight,
+            extra_obstacles_xy=np.concatenate(self.virtual_obstacles) if self.virtual_obstacles else None,
+        )
+
+    def next_goal(
+        self, grid: OccupancyGrid, T_map_base: Pose2
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """``(goal_xy (2,), path (N, 2))`` towards the best reachable frontier, or None when no reachable
+        frontier is left (exploration done, as far as this map tells)."""
+        robot = np.array([T_map_base.x, T_map_base.y], dtype=np.float64)
+        if not np.isfinite(robot).all():
+            return None
+        cm = self._costmap(grid, robot)
+        data = np.asarray(grid.data)[cm.row0 : cm.row0 + cm.shape[0], cm.col0 : cm.col0 + cm.shape[1]]
+        labels, n = label_frontiers(data, min_size_cells=self.min_frontier_size, free_threshold=self.free_threshold)
+        self.frontiers = frontiers_from_labels(grid, labels, n, cm.row0, cm.col0)
+        s_cell = cm.to_cells(robot[None])[0]
+        if n == 0 or not cm.in_bounds(s_cell[None])[0]:
+            return self._clear()
+        start = (int(s_cell[0]), int(s_cell[1]))
+        dist, pred = cost_to_go(cm, start)
+        res = cm.resolution
+
+        # nearest frontier cell of every cell: which frontier a candidate approach cell serves
+        dist_f, (ir, ic) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+        near_label = labels[ir, ic]
+        usable = (
+            cm.traversable
+            & np.isfinite(dist)
+            & (near_label > 0)
+            & (cm.clearance >= self.robot_radius_m + self.goal_clearance_m)
+        )
+        sizes = np.array([f.size for f in self.frontiers], dtype=np.float64)
+
+        # keep the current goal while it stays valid (hysteresis), unless a frontier is much cheaper
+        keep: tuple[tuple[int, int], float, int] | None = None
+        if self.goal_xy is not None and not self._blacklisted(self.goal_xy[None])[0]:
+            g = cm.to_cells(self.goal_xy[None])[0]
+            if cm.in_bounds(g[None])[0] and usable[g[0], g[1]] and (
+                dist_f[g[0], g[1]] * res <= self.approach_radius_m + self.keep_slack_m
+            ):
+                glab = int(near_label[g[0], g[1]])
+                keep = ((int(g[0]), int(g[1])), dist[g[0], g[1]] * res - self.gain_weight * sizes[glab - 1] * res, glab)
+
+        rows, cols = np.nonzero(usable & (dist_f * res <= self.approach_radius_m))
+        xy = cm.to_xy(np.stack([rows, cols], axis=1))
+        ok = ~self._blacklisted(xy)
+        rows, cols, xy = rows[ok], cols[ok], xy[ok]
+        if rows.size == 0 and keep is None:
+            return self._clear()
+        if rows.size:
+            lab = near_label[rows, cols]
+            path_cost = dist[rows, cols] * res
+            score = path_cost - self.gain_weight * sizes[lab - 1] * res
+            # best approach cell per frontier (cheapest to reach), then the best frontier
+            order = np.lexsort((path_cost, lab))
+            first = order[np.unique(lab[order], return_index=True)[1]]
+            best = int(first[np.argmin(score[first])])
+        if keep is not None and (rows.size == 0 or score[best] >= keep[1] - self.switch_margin_m):
+            goal_cell, goal_label = keep[0], keep[2]
+            goal_xy = self.goal_xy.copy()
+        else:
+            goal_cell, goal_label = (int(rows[best]), int(cols[best])), int(lab[best])
+            goal_xy = xy[best].copy()
+        cells = extract_path(pred, cm.shape[1], goal_cell)
+        local = smooth_path(cm, cells, cm.to_local(robot[None])[0], None)
+        if len(local) == 1:
+            local = np.vstack([cm.to_local(robot[None]), local])
+        path = local_to_xy(cm, local)
+        self.goal_xy = goal_xy
+        self.path = path
+        self.goal_frontier = self.frontiers[goal_label - 1]
+        return self.goal_xy.copy(), path
+
+    def _blacklisted(self, xy: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """``(N,)`` True for points within ``blacklist_radius_m`` of a blacklisted point."""
+        if not self.blacklist or len(xy) == 0:
+            return np.zeros(len(xy), dtype=bool)
+        bl = np.asarray(self.blacklist)
+        d2 = ((xy[:, None, :] - bl[None, :, :]) ** 2).sum(axis=2).min(axis=1)
+        return d2 <= self.blacklist_radius_m**2
+
+    def _clear(self) -> None:
+        self.goal_xy = None
+        self.path = None
+        self.goal_frontier = None
+        return None
+
+
+class ExplorationController:
+    """Exploration loop: goals from a :class:`FrontierExplorer`, motion from a :class:`PathFollower`.
+
+    Call :meth:`compute` every control step with the latest SLAM grid, pose and scan; it returns the
+    ``cmd_vel``. ``status``: ``"idle"`` (not started), ``"exploring"``, ``"done"`` (no reachable frontier
+    left on ``done_confirmations`` consecutive new maps) or ``"stopped"``.
+    """
+
+    def __init__(
+        self,
+        robot: RobotConfig,
+        *,
+        explorer: FrontierExplorer | None = None,
+        follower: PathFollower | None = None,
+        replan_period_s: float = 1.0,
+        progress_timeout_s: float = 15.0,
+        progress_distance_m: float = 0.2,
+        blocked_replan_s: float = 2.0,
+        max_blocked_replans: int = 3,
+        done_confirmations: int = 3,
+        stuck_time_s: float = 3.0,
+        stuck_distance_m: float = 0.05,
+        stuck_min_cmd_mps: float = 0.05,
+    ) -> None:
+        self.robot = robot
+        self.explorer = explorer or FrontierExplorer(robot.footprint_radius_m)
+        self.follower = follower or PathFollower(robot, goal_tolerance_m=0.15)
+        self.replan_period_s = float(replan_period_s)
+        self.progress_timeout_s = float(progress_timeout_s)
+        self.progress_distance_m = float(progress_distance_m)
+        self.blocked_replan_s = float(blocked_replan_s)
+        self.max_blocked_replans = int(max_blocked_replans)
+        self.done_confirmations = int(done_confirmations)
+        self.stuck_time_s = float(stuck_time_s)
+        self.stuck_distance_m = float(stuck_distance_m)
+        self.stuck_min_cmd_mps = float(stuck_min_cmd_mps)
+        self.stuck_events = 0
+        self.status = "idle"
+        self.goals_reached = 0
+        self.goals_failed = 0
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self._last_plan_t = -math.inf
+        self._last_map_key: tuple[int, float] | None = None
+        self._none_count = 0
+        self._checkpoint: NDArray[np.float64] | None = None
+        self._checkpoint_t = 0.0
+        self._blocked_since: float | None = None
+        self._blocked_replans = 0
+        self._history: list[tuple[float, float, float, float]] = []  # (t, x, y, commanded v)
+
+    @property
+    def goal_xy(self) -> NDArray[np.float64] | None:
+        return self.explorer.goal_xy
+
+    @property
+    def path(self) -> NDArray[np.float64] | None:
+        return self.follower.path
+
+    def start(self) -> None:
+        """Start (or restart) exploring; the blacklist is kept across restarts of the same map."""
+        self.status = "exploring"
+        self._reset_state()
+        self.follower.clear()
+        self.explorer.goal_xy = None
+
+    def stop(self) -> None:
+        """Stop exploring (user takes over)."""
+        self.status = "stopped"
+        self.follower.clear()
+        self.explorer.goal_xy = None
+
+    def _fail_goal(self) -> None:
+        self.explorer.mark_failed()
+        self.goals_failed += 1
+        self.follower.clear()
+        self._history.clear()
+
+    def _stuck(self, now: float, p: NDArray[np.float64]) -> bool:
+        """Driving forward for ``stuck_time_s`` without moving ``stuck_distance_m``: something the LIDAR
+        does not see (glass, a low obstacle) holds the robot."""
+        h = self._history
+        while h and now - h[0][0] > self.stuck_time_s:
+            h.pop(0)
+        if not h or now - h[0][0] < 0.9 * self.stuck_time_s:
+            return False
+        v = np.array([e[3] for e in h])
+        moved = max(math.hypot(e[1] - p[0], e[2] - p[1]) for e in h)
+        return bool(v.mean() >= self.stuck_min_cmd_mps and moved < self.stuck_distance_m)
+
+    def _add_stuck_obstacle(self, T_map_base: Pose2) -> None:
+        """A virtual wall piece across the heading, just ahead of the robot's front."""
+        r = self.robot.footprint_radius_m
+        res = 0.025
+        lateral = np.arange(-2.0 * r, 2.0 * r + res / 2, res)
+        ahead = np.full_like(lateral, r + 0.05)
+        self.explorer.add_virtual_obstacle(T_map_base.transform_points(np.stack([ahead, lateral], axis=1)))
+
+    def compute(
+        self,
+        grid: OccupancyGrid,
+        T_map_base: Pose2,
+        scan: LaserScan | None = None,
+        T_base_scan: Pose2 | None = None,
+        now: float = 0.0,
+    ) -> Twist:
+        """One control step at sim time ``now`` (s). Returns the ``cmd_vel``."""
+        if self.status != "exploring":
+            return Twist()
+        p = np.array([T_map_base.x, T_map_base.y])
+        map_key = (id(grid), float(grid.stamp))
+        new_map = map_key != self._last_map_key
+        need_plan = self.follower.path is None and (new_map or now - self._last_plan_t >= self.replan_period_s)
+
+        if self.follower.status == ARRIVED:
+            self.explorer.mark_reached()
+            self.goals_reached += 1
+            self.follower.clear()
+            need_plan = True
+        elif self.follower.path is not None:
+            # progress watchdog: the robot must move progress_distance_m every progress_timeout_s
+            if self._checkpoint is None or np.linalg.norm(p - self._checkpoint) >= self.progress_distance_m:
+                self._checkpoint, self._checkpoint_t = p, now
+            elif now - self._checkpoint_t > self.progress_timeout_s:
+                self._fail_goal()
+                need_plan = True
+            if self.follower.path is not None and self._stuck(now, p):
+                self.stuck_events += 1
+                self._add_stuck_obstacle(T_map_base)
+                self._fail_goal()
+                need_plan = True
+            if self.follower.status == BLOCKED:
+                if self._blocked_since is None:
+                    self._blocked_since = now
+                elif now - self._blocked_since >= self.blocked_replan_s:
+                    self._blocked_since = None
+                    self._blocked_replans += 1
+                    if self._blocked_replans > self.max_blocked_replans:
+                        self._fail_goal()
+                    need_plan = True
+            else:
+                self._blocked_since = None
+            if new_map and now - self._last_plan_t >= self.replan_period_s:
+                need_plan = True
+
+        if need_plan:
+            self._last_map_key = map_key
+            self._last_plan_t = now
+            old_goal = self.explorer.goal_xy
+            result = self.explorer.next_goal(grid, T_map_base)
+            if result is None:
+                self.follower.clear()
+                self._none_count += 1
+                if self._none_count >= self.done_confirmations:
+                    self.status = "done"
+                return Twist()
+            self._none_count = 0
+            goal, path = result
+            if old_goal is None or not np.allclose(goal, old_goal):
+                self._checkpoint, self._checkpoint_t = p, now
+                self._blocked_replans = 0
+            self.follower.set_path(path)
+        twist = self.follower.compute(T_map_base, scan, T_base_scan)
+        self._history.append((now, float(p[0]), float(p[1]), twist.linear_x))
+        return twist

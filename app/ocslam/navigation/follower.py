@@ -1,0 +1,364 @@
+"""Path following: pure pursuit with rotate-in-place, goal slow-down and a LIDAR safety stop.
+
+:class:`PathFollower` tracks an ``(N, 2)`` polyline in the ``map`` frame and turns the robot pose
+``T_map_base`` (and the latest LIDAR scan) into a :class:`~app.ocslam.messages.Twist` (``cmd_vel``).
+:class:`RouteFollower` visits a list of waypoints in order with the same controller.
+
+Safety stop (the scan's valid returns, mapped through ``T_base_scan`` and ``T_map_base``):
+
+* *path check*: a disk of ``path_check_radius_m`` swept along the path over the next ``stop_distance_m``
+  must not come closer to a scan point than the robot is now. If it would, the status is ``"blocked"``
+  and the twist zero (until the obstacle leaves or the caller replans); within a further
+  ``obstacle_slowdown_m`` the speed is reduced. This catches obstacles *on* the path that the map does
+  not hold yet; clearance from mapped obstacles is the planner's job (its inflation is measured between
+  cell centres, so LIDAR returns on an obstacle's surface may lie up to about half a cell closer than
+  the robot's radius: the check radius defaults to ``0.75 × radius`` so that valid paths through tight
+  gaps are not refused). Points already that close (a robot squeezed next to a wall) do not block a
+  path that leads away from them.
+* *bumper box*: a point right in front of the body (``0 < x <= radius + emergency_distance``,
+  ``|y| <= bumper_half_width``, default ``0.85 × radius``, about the Burger's real half-width) forbids
+  driving forward (pure pursuit cuts corners a little); the robot turns in place towards the path if
+  that direction is free, else reports ``"blocked"``.
+
+Rotating in place is always allowed: the TurtleBot3 Burger is round.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from app.ocslam.config import RobotConfig
+from app.ocslam.messages import LaserScan, Twist
+from app.ocslam.se2 import Pose2
+
+IDLE, FOLLOWING, ARRIVED, BLOCKED, DONE = "idle", "following", "arrived", "blocked", "done"
+
+
+def _as_path(path_xy: ArrayLike) -> NDArray[np.float64]:
+    p = np.asarray(path_xy, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) == 0:
+        raise ValueError(f"path must be an (N, 2) array with N >= 1, got shape {p.shape}")
+    if not np.isfinite(p).all():
+        raise ValueError("path contains non-finite coordinates")
+    return p
+
+
+def scan_points_base(scan: LaserScan | None, T_base_scan: Pose2) -> NDArray[np.float64]:
+    """``(M, 2)`` valid scan returns in ``base_footprint`` (NaN/inf/out-of-range beams are skipped)."""
+    if scan is None or len(scan.ranges) == 0:
+        return np.zeros((0, 2))
+    return T_base_scan.transform_points(scan.points())
+
+
+def corridor_clearance(points_base: NDArray[np.float64], heading: float, half_width: float) -> float:
+    """Distance along ``heading`` (rad, in ``base_footprint``) to the nearest point of ``points_base``
+    inside the corridor ``|lateral| <= half_width`` ahead of the robot; ``inf`` if none."""
+    if len(points_base) == 0:
+        return math.inf
+    c, s = math.cos(heading), math.sin(heading)
+    along = c * points_base[:, 0] + s * points_base[:, 1]
+    lateral = -s * points_base[:, 0] + c * points_base[:, 1]
+    m = (along > 0.0) & (np.abs(lateral) <= half_width)
+    return float(along[m].min()) if m.any() else math.inf
+
+
+class PathFollower:
+    """Pure-pursuit follower of a polyline in the ``map`` frame.
+
+    ``status`` is ``"idle"`` (no path), ``"following"``, ``"arrived"`` (within ``goal_tolerance_m`` of
+    the last point; the twist is zero until a new path is set) or ``"blocked"`` (an obstacle in the stop
+    box and no clear way to turn towards the path).
+    """
+
+    _ALIGNED_RAD = 0.05  # below this heading error, a blocked stop box means "blocked", not "turn"
+
+    def __init__(
+        self,
+        robot: RobotConfig,
+        *,
+        lookahead_m: float = 0.3,
+        goal_tolerance_m: float = 0.1,
+        max_linear_mps: float = 0.22,
+        max_angular_rps: float = 1.5,
+        stop_distance_m: float = 0.2,
+        path_check_radius_m: float | None = None,
+        bumper_half_width_m: float | None = None,
+        rotate_in_place_rad: float = 0.9,
+        rotate_done_rad: float = 0.3,
+        slowdown_distance_m: float = 0.5,
+        obstacle_slowdown_m: float = 0.3,
+        emergency_distance_m: float = 0.05,
+        min_linear_mps: float = 0.03,
+        min_angular_rps: float = 0.3,
+        heading_gain: float = 2.5,
+    ) -> None:
+        if lookahead_m <= 0 or goal_tolerance_m <= 0:
+            raise ValueError("lookahead_m and goal_tolerance_m must be > 0")
+        self.robot = robot
+        self.radius = float(robot.footprint_radius_m)
+        self.lookahead_m = float(lookahead_m)
+        self.goal_tolerance_m = float(goal_tolerance_m)
+        self.max_linear_mps = float(min(max_linear_mps, robot.max_linear_mps))
+        self.max_angular_rps = float(min(max_angular_rps, robot.max_angular_rps))
+        self.stop_distance_m = float(stop_distance_m)
+        self.path_check_radius_m = float(
+            path_check_radius_m if path_check_radius_m is not None else 0.75 * self.radius
+        )
+        self.bumper_half_width_m = float(
+            bumper_half_width_m if bumper_half_width_m is not None else 0.85 * self.radius
+        )
+        self.rotate_in_place_rad = float(rotate_in_place_rad)
+        self.rotate_done_rad = float(min(rotate_done_rad, rotate_in_place_rad))
+        self.slowdown_distance_m = float(slowdown_distance_m)
+        self.obstacle_slowdown_m = float(obstacle_slowdown_m)
+        self.emergency_distance_m = float(emergency_distance_m)
+        self.min_linear_mps = float(min(min_linear_mps, self.max_linear_mps))
+        self.min_angular_rps = float(min(min_angular_rps, self.max_angular_rps))
+        self.heading_gain = float(heading_gain)
+        self.path: NDArray[np.float64] | None = None
+        self.status: str = IDLE
+        self.progress_index = 0
+        self.target_xy: NDArray[np.float64] | None = None  # last lookahead point (for drawing)
+        self.path_clearance_m = math.inf  # free path length ahead at the last step (m)
+        self._rotating = False
+        self._cum = np.zeros(1)
+        self._last_s = 0.0
+
+    # -- path ------------------------------------------------------------------------------------
+    def set_path(self, path_xy: ArrayLike) -> None:
+        """Follow ``(N, 2)`` waypoints in the ``map`` frame (N >= 1; one point means "go there")."""
+        p = _as_path(path_xy)
+        if len(p) == 1:
+            p = np.vstack([p, p])
+        self.path = p
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+        self.progress_index = 0
+        self._last_s = 0.0
+        self.status = FOLLOWING
+        self._rotating = False
+        self.target_xy = None
+
+    def clear(self) -> None:
+        """Drop the path; the follower idles (zero twist)."""
+        self.path = None
+        self.status = IDLE
+        self.progress_index = 0
+        self._rotating = False
+        self.target_xy = None
+
+    @property
+    def goal_xy(self) -> NDArray[np.float64] | None:
+        return None if self.path is None else self.path[-1]
+
+    def _project(self, p: NDArray[np.float64]) -> tuple[int, float, float]:
+        """Project ``p`` on the path segments from ``progress_index`` up to a short window ahead.
+
+        Returns ``(segment, arclength, distance)`` and never moves backwards along the path.
+        """
+        assert self.path is not None
+        a, b = self.path[:-1], self.path[1:]
+        n = len(a)
+        k0 = min(self.progress_index, n - 1)
+        window_end = self._cum[k0 + 1] + self.lookahead_m + 1.0
+        k1 = int(np.searchsorted(self._cum[:-1], window_end, side="right"))
+        k1 = max(k0 + 1, min(n, k1))
+        aa, bb = a[k0:k1], b[k0:k1]
+        d = bb - aa
+        L2 = (d * d).sum(axis=1)
+        t = np.where(L2 > 0, ((p - aa) * d).sum(axis=1) / np.where(L2 > 0, L2, 1.0), 0.0)
+        t = np.clip(t, 0.0, 1.0)
+        q = aa + t[:, None] * d
+        dist = np.linalg.norm(q - p, axis=1)
+        i = int(np.argmin(dist))
+        k = k0 + i
+        s = self._cum[k] + t[i] * math.sqrt(L2[i])
+        return k, float(s), float(dist[i])
+
+    def _point_at(self, s: float) -> NDArray[np.float64]:
+        assert self.path is not None
+        s = min(max(s, 0.0), float(self._cum[-1]))
+        return np.array([np.interp(s, self._cum, self.path[:, 0]), np.interp(s, self._cum, self.path[:, 1])])
+
+    def _path_clearance(self, p: NDArray[np.float64], s: float, pts_map: NDArray[np.float64]) -> float:
+        """Arc length from the robot's projection ``s`` to the first path sample (every 5 cm up to
+        ``stop_distance + obstacle_slowdown``) where the robot's disk would come within the safety
+        radius of a scan point (``(M, 2)``, map frame) and closer to it than it is now; ``inf`` if none."""
+        if len(pts_map) == 0:
+            return math.inf
+        safety = self.path_check_radius_m
+        horizon = self.stop_distance_m + self.obstacle_slowdown_m
+        d_now = np.linalg.norm(pts_map - p, axis=1)
+        near = d_now <= horizon + safety + 0.05
+        if not near.any():
+            return math.inf
+        pts_map, d_now = pts_map[near], d_now[near]
+        ds = np.arange(0.0, horizon + 1e-9, 0.05)
+        assert self.path is not None
+        sa = np.minimum(s + ds, self._cum[-1])
+        samples = np.stack([np.interp(sa, self._cum, self.path[:, 0]), np.interp(sa, self._cum, self.path[:, 1])], 1)
+        d = np.linalg.norm(pts_map[:, None, :] - samples[None, :, :], axis=2)
+        hit = ((d < safety) & (d < d_now[:, None] - 0.01)).any(axis=0)
+        return float(ds[int(np.argmax(hit))]) if hit.any() else math.inf
+
+    @property
+    def remaining_m(self) -> float:
+        """Path length left from the last projection (0 without a path)."""
+        if self.path is None:
+            return 0.0
+        return float(self._cum[-1] - self._last_s)
+
+    # -- control ---------------------------------------------------------------------------------
+    def compute(
+        self, T_map_base: Pose2, scan: LaserScan | None = None, T_base_scan: Pose2 | None = None
+    ) -> Twist:
+        """One control step: the ``cmd_vel`` for the robot at ``T_map_base`` given the latest scan."""
+        if self.path is None:
+            self.status = IDLE
+            return Twist()
+        if self.status == ARRIVED:
+            return Twist()
+        p = np.array([T_map_base.x, T_map_base.y])
+        if not np.isfinite(p).all() or not math.isfinite(T_map_base.yaw):
+            self.status = BLOCKED
+            return Twist()
+        k, s, _ = self._project(p)
+        self.progress_index = k
+        self._last_s = s
+        goal = self.path[-1]
+        d_goal = float(np.linalg.norm(goal - p))
+        total = float(self._cum[-1])
+        remaining = total - s
+        last_seg = k >= len(self.path) - 2
+        if d_goal <= self.goal_tolerance_m and (last_seg or remaining <= self.lookahead_m):
+            self.status = ARRIVED
+            self._rotating = False
+            return Twist()
+
+        target = goal if s + self.lookahead_m >= total else self._point_at(s + self.lookahead_m)
+        self.target_xy = target
+        t_base = T_map_base.inverse().transform_points(target[None])[0]
+        ld = float(math.hypot(t_base[0], t_base[1]))
+        alpha = math.atan2(t_base[1], t_base[0]) if ld > 1e-9 else 0.0
+
+        if self._rotating and abs(alpha) < self.rotate_done_rad:
+            self._rotating = False
+        elif not self._rotating and abs(alpha) > self.rotate_in_place_rad:
+            self._rotating = True
+
+        pts = scan_points_base(scan, T_base_scan if T_base_scan is not None else Pose2())
+        along = self._path_clearance(p, s, T_map_base.transform_points(pts) if len(pts) else pts)
+        self.path_clearance_m = along
+        if along <= self.stop_distance_m:
+            self.status = BLOCKED
+            return Twist()
+        bumper = self.radius + self.emergency_distance_m
+        half = self.bumper_half_width_m
+        if not self._rotating and corridor_clearance(pts, 0.0, half) <= bumper:
+            # something right in front of the body: turn towards the path if that way is free
+            if abs(alpha) > self._ALIGNED_RAD and corridor_clearance(pts, alpha, half) > bumper:
+                self._rotating = True
+            else:
+                self.status = BLOCKED
+                return Twist()
+        self.status = FOLLOWING
+
+        if self._rotating:
+            w = self.heading_gain * alpha
+            w = math.copysign(min(max(abs(w), self.min_angular_rps), self.max_angular_rps), alpha)
+            return Twist(0.0, w)
+
+        # pure pursuit: curvature of the arc through the lookahead point
+        kappa = 2.0 * t_base[1] / (ld * ld) if ld > 1e-9 else 0.0
+        v = self.max_linear_mps
+        dist_left = min(d_goal, remaining + d_goal)
+        v = min(v, max(self.min_linear_mps, self.max_linear_mps * dist_left / self.slowdown_distance_m))
+        if math.isfinite(along):
+            room = (along - self.stop_distance_m) / self.obstacle_slowdown_m
+            v = min(v, max(self.min_linear_mps, self.max_linear_mps * min(1.0, room)))
+        if abs(kappa) * v > self.max_angular_rps:
+            v = max(self.max_angular_rps / abs(kappa), 0.0)
+        w = float(np.clip(v * kappa, -self.max_angular_rps, self.max_angular_rps))
+        return Twist(float(v), w)
+
+
+class RouteFollower:
+    """Visit ``(N, 2)`` waypoints (``map`` frame) in order with a :class:`PathFollower`.
+
+    The robot follows the polyline ``[start, w_k, …, w_N-1]`` from the next unvisited waypoint ``w_k``.
+    A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it or its
+    progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
+    current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
+    skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
+    """
+
+    def __init__(
+        self,
+        robot: RobotConfig,
+        waypoints_xy: ArrayLike,
+        *,
+        waypoint_tolerance_m: float = 0.25,
+        blocked_timeout_s: float = 10.0,
+        **follower_kwargs: float,
+    ) -> None:
+        self.waypoints = _as_path(waypoints_xy)
+        self.follower = PathFollower(robot, **follower_kwargs)
+        self.waypoint_tolerance_m = float(waypoint_tolerance_m)
+        self.blocked_timeout_s = float(blocked_timeout_s)
+        self.current = 0
+        self.skipped: list[int] = []
+        self.done = False
+        self.status = IDLE
+        self._k0 = 0
+        self._blocked_since: float | None = None
+
+    def _restart(self, p: NDArray[np.float64]) -> None:
+        self._k0 = self.current
+        self.follower.set_path(np.vstack([p[None], self.waypoints[self.current :]]))
+
+    def compute(
+        self,
+        T_map_base: Pose2,
+        scan: LaserScan | None = None,
+        T_base_scan: Pose2 | None = None,
+        now: float | None = None,
+    ) -> Twist:
+        """One control step. ``now`` (s, sim time; default the scan's stamp) times the blocked timeout."""
+        if self.done:
+            self.status = DONE
+            return Twist()
+        if now is None:
+            now = scan.stamp if scan is not None else 0.0
+        p = np.array([T_map_base.x, T_map_base.y])
+        if self.follower.path is None:
+            self._restart(p)
+        n = len(self.waypoints)
+        while self.current < n - 1 and np.linalg.norm(self.waypoints[self.current] - p) <= self.waypoint_tolerance_m:
+            self.current += 1
+        twist = self.follower.compute(T_map_base, scan, T_base_scan)
+        self.current = max(self.current, min(n - 1, self._k0 + self.follower.progress_index))
+        if self.follower.status == ARRIVED:
+            self.current = n
+            self.done = True
+            self.status = DONE
+            return Twist()
+        if self.follower.status == BLOCKED:
+            if self._blocked_since is None:
+                self._blocked_since = now
+            elif now - self._blocked_since >= self.blocked_timeout_s:
+                self._blocked_since = None
+                self.skipped.append(self.current)
+                self.current += 1
+                if self.current >= n:
+                    self.done = True
+                    self.status = DONE
+                    return Twist()
+                self._restart(p)
+                twist = Twist()
+        else:
+            self._blocked_since = None
+        self.status = self.follower.status
+        return twist

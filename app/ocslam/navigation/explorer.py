@@ -147,6 +147,7 @@ class FrontierExplorer:
         near_label = labels[ir, ic]
         usable = (
             cm.traversable
+            & ~cm.unknown  # goals on observed cells only: the path may cross unknown, the goal may not
             & np.isfinite(dist)
             & (near_label > 0)
             & (cm.clearance >= self.robot_radius_m + self.goal_clearance_m)

@@ -46,6 +46,10 @@ def resolve_path(p: str | os.PathLike[str]) -> Path:
     return PROJECT_ROOT / path
 
 
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """Write ``data`` to a temporary file beside ``path``, then rename it over ``path``."""
     path = Path(path)
@@ -56,6 +60,7 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -146,6 +151,7 @@ class UiConfig:
     update_hz: float = param(10.0, min=1.0, max=30.0, unit="Hz", help="scene update rate", live=True)
     map_hz: float = param(1.0, min=0.1, max=5.0, unit="Hz", help="occupancy grid update rate", live=True)
     camera_width: int = param(320, min=64, max=1280, help="width of the camera panel image")
+    wall_height_m: float = param(0.6, min=0.05, max=5.0, unit="m", help="walls are drawn cut away at this height (0: full)")
     teleop_deadman_s: float = param(0.6, min=0.1, max=5.0, unit="s", help="keyboard teleop stops after this", live=True)
     teleop_linear_mps: float = param(0.15, min=0.0, max=2.0, step=0.01, unit="m/s", help="teleop speed", live=True)
     teleop_angular_rps: float = param(1.0, min=0.0, max=10.0, step=0.05, unit="rad/s", help="teleop turn rate", live=True)

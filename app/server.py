@@ -270,17 +270,8 @@ class OcslamApp:
     def _clients(self, client: Any) -> list[Any]:
         return [client] if client is not None else list(self.server.get_clients().values())
 
-    def _world_center(self) -> tuple[np.ndarray, float]:
-        grid = self.pipeline.slam.occupancy_grid()
-        if grid.width > 2:
-            w, h = grid.width * grid.resolution, grid.height * grid.resolution
-            c = grid.origin.transform_points(np.array([[w / 2, h / 2]]))[0]
-            return c, max(w, h)
-        T = self.pipeline.T_map_base
-        return np.array([T.x, T.y]), 8.0
-
     def top_down_view(self, client: Any = None) -> None:
-        c, size = self._world_center()
+        c, size = self._world_bounds_map()
         for cl in self._clients(client):
             if hasattr(cl.camera, "up_direction"):
                 cl.camera.up_direction = (0.0, 1.0, 0.0)
@@ -296,11 +287,18 @@ class OcslamApp:
                     cl.camera.position = (T.x - 1.2, T.y - 1.2, 1.4)
                 return
 
+    def _world_bounds_map(self) -> tuple[np.ndarray, float]:
+        """Centre ``(2,)`` and size of the world, in the map frame."""
+        xmin, ymin, xmax, ymax = self.pipeline.world.bounds()
+        corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+        c = self.pipeline.T_map_world.transform_points(corners)
+        return c.mean(axis=0), float(max(xmax - xmin, ymax - ymin))
+
     def _set_initial_camera(self) -> None:
-        T = self.pipeline.T_map_base
+        c, size = self._world_bounds_map()
         ic = self.server.initial_camera
-        ic.look_at = (T.x + 1.5, T.y, 0.0)
-        ic.position = (T.x - 2.5, T.y - 2.5, 3.5)
+        ic.look_at = (float(c[0]), float(c[1]), 0.0)
+        ic.position = (float(c[0]) - 0.35 * size, float(c[1]) - 0.55 * size, 0.75 * size)
         ic.up = (0.0, 0.0, 1.0)
 
     def _on_connect(self, client: Any) -> None:
@@ -319,6 +317,11 @@ class OcslamApp:
             if s <= 0:
                 return
             x, y = (o + s * d)[:2]
+            grid = self.pipeline.slam.occupancy_grid()
+            if grid.width and grid.height:
+                rc = grid.world_to_cell(np.array([[x, y]]))[0]
+                if not (0 <= rc[0] < grid.height and 0 <= rc[1] < grid.width) or grid.data[rc[0], rc[1]] < 0:
+                    return  # off the known map (e.g. a click to focus the canvas): not a goal
             self.teleop.stop()
             self.submit(lambda p: p.go_to((float(x), float(y))) or self.notify(
                 event.client, "No path", f"no path to ({x:.2f}, {y:.2f}) on the SLAM grid", "orange"), client=event.client)

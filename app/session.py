@@ -15,6 +15,7 @@ A run directory holds::
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import logging
@@ -232,13 +233,31 @@ def load_session(pipe: "Pipeline", path: str | Path) -> None:
     pipe.stop_autonomy("session loaded")
 
 
+def recording_html(scene_bytes: bytes, dark_mode: bool = False) -> str:
+    """A self-contained HTML player for ``.viser`` bytes (what viser's ``StateSerializer.as_html`` does,
+    without serialising twice)."""
+    import base64
+
+    import viser
+
+    client = (Path(viser.__file__).parent / "client" / "build" / "index.html").read_text(encoding="utf-8")
+    b64 = base64.b64encode(scene_bytes).decode("ascii")
+    inject = (
+        f'<script>window.__VISER_EMBED_DATA__="{b64}";'
+        f"window.__VISER_EMBED_CONFIG__={{darkMode:{'true' if dark_mode else 'false'}}};</script>"
+    )
+    i = client.index("</head>")
+    return client[:i] + inject + client[i:]
+
+
 def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> None:
     """A `.viser` recording (and a self-contained HTML player): the final map, objects and graph, with the
     robot replaying its SLAM trajectory."""
     from app.ui.scene import SceneLayers
     from app.ui.security import create_server
 
-    server, _ = create_server("127.0.0.1", 0)
+    with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner even with verbose=False
+        server, _ = create_server("127.0.0.1", 0)
     try:
         layers = SceneLayers(server, pipe)
         for key in ("truth", "graph"):
@@ -253,10 +272,9 @@ def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> No
                 T = Pose2.from_array(traj[i])
                 layers._set_pose(layers.robot_root, T)
                 rec.insert_sleep(min(max(dt / 4.0, 0.02), 0.25))  # 4× faster than real time
-        atomic_write_bytes(out / "scene.viser", rec.serialize())
-        try:
-            atomic_write_text(out / "scene.html", rec.as_html())
-        except Exception as e:
-            log.info("no HTML player: %s", e)
+        data = rec.serialize()
+        atomic_write_bytes(out / "scene.viser", data)
+        atomic_write_text(out / "scene.html", recording_html(data))
     finally:
-        server.stop()
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()

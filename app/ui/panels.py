@@ -307,7 +307,7 @@ class Panels:
         b = gui.add_button("Load session", icon=viser.Icon.FOLDER_OPEN, hint="restore map, objects and pose graph")
         b.on_click(lambda ev: self.app.load_session(self.session_path.value, client=ev.client))
         self.map_path = gui.add_text("Map file", "runs/map.yaml")
-        b = gui.add_button("Export map", icon=viser.Icon.MAP_DOWN, hint="map_server / Nav2 YAML + PGM")
+        b = gui.add_button("Export map", icon=viser.Icon.DOWNLOAD, hint="map_server / Nav2 YAML + PGM")
         b.on_click(lambda ev: self.app.export_map(self.map_path.value, client=ev.client))
         self.session_status = gui.add_markdown("")
 
@@ -323,7 +323,7 @@ class Panels:
         mode = p.drive_mode + (f" — {p.nav_status}" if p.nav_status else "")
         paused = " **(paused)**" if app.paused else ""
         self.status.content = (
-            f"sim **{p.time:7.1f} s** · ×{rtf:4.1f} real time{paused}  \n"
+            f"sim **{p.time:.1f} s** · ×{rtf:.1f} real time{paused}  \n"
             f"map: x {T.x:+.2f} y {T.y:+.2f} θ {math.degrees(T.yaw):+.0f}°  \n"
             f"odom: x {odo.x:+.2f} y {odo.y:+.2f} θ {math.degrees(odo.yaw):+.0f}°  \n"
             f"drive: {mode}"

@@ -154,7 +154,7 @@ class SceneLayers:
         )
         # occupancy grid
         self.grid_image = s.add_image(
-            "/layers/grid/map", np.full((2, 2, 3), 205, np.uint8), 0.1, 0.1, format="png", position=(0, 0, -0.003),
+            "/layers/grid/map", np.full((2, 2, 3), 205, np.uint8), 0.1, 0.1, format="png", position=(0, 0, 0.007),
             cast_shadow=False, receive_shadow=False,
         )
         # trajectories and graph
@@ -184,7 +184,13 @@ class SceneLayers:
         except Exception as e:
             log.error("world meshes not shown: %s", e)
             return
+        cut = self.pipeline.cfg.ui.wall_height_m
         for i, (name, mesh) in enumerate(meshes):
+            if name.startswith("wall") and cut > 0:  # cut-away walls, so the rooms can be seen from above
+                zmax = float(mesh.bounds[1, 2])
+                if zmax > cut:
+                    mesh = mesh.copy()
+                    mesh.apply_scale([1.0, 1.0, cut / zmax])
             safe = "".join(c if c.isalnum() or c in "_-" else "_" for c in name) or f"m{i}"
             self.scene.add_mesh_trimesh(f"/layers/world/T_map_world/{i:03d}_{safe}", mesh)
 
@@ -376,7 +382,7 @@ class SceneLayers:
                 self.grid_image.image = rgb
                 self.grid_image.render_width = w
                 self.grid_image.render_height = h
-                self.grid_image.position = (float(c[0]), float(c[1]), -0.003)
+                self.grid_image.position = (float(c[0]), float(c[1]), 0.007)
                 self.grid_image.wxyz = wxyz(o.yaw)
         if self.is_visible("traj_slam"):
             _, traj = p.slam.trajectory()

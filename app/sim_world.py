@@ -15,8 +15,8 @@ Design (measured choices, see ``ocslam bench sim``):
 - **LIDAR**: one ``rayTestBatch`` from the ``base_scan`` frame of the URDF; **camera**: TinyRenderer from
   ``camera_optical_frame``, with depth and a segmentation of ground-truth object ids.
 
-Every message is stamped with sim time (``SimWorld.time``). All noise comes from one seeded
-``numpy.random.Generator``. Ground truth (:meth:`true_pose`, :meth:`ground_truth_objects`, ...) is for
+Every message is stamped with sim time (``SimWorld.time``). All noise comes from seeded
+``numpy.random.Generator`` streams (one per source). Ground truth (:meth:`true_pose`, :meth:`ground_truth_objects`, ...) is for
 evaluation and overlays only.
 
 Example:
@@ -219,8 +219,12 @@ class SimWorld:
     # state
     # ------------------------------------------------------------------------------------------
     def reset(self) -> None:
-        """Back to the world's start pose at t = 0, wheels at zero, noise re-seeded."""
-        self.rng = np.random.default_rng(self.seed)
+        """Back to the world's start pose at t = 0, wheels at zero, noise re-seeded.
+
+        Each noise source has its own stream (motion/slip, encoders, LIDAR, camera) spawned from the
+        seed, so which sensors are read, and how often, never changes the robot's true trajectory."""
+        ss = np.random.SeedSequence(self.seed)
+        self.rng_motion, self.rng_encoders, self.rng_lidar, self.rng_camera = (np.random.default_rng(s) for s in ss.spawn(4))
         self.time = 0.0
         self._steps = 0
         self._pose = np.array([self.world.start.x, self.world.start.y, self.world.start.yaw], dtype=np.float64)
@@ -229,11 +233,12 @@ class SimWorld:
         self._omega_cmd = np.zeros(2)
         self._slip = np.zeros(2)
         e = self.config.encoders
-        self._radius_scale = 1.0 + self.rng.normal(0.0, e.radius_error_std, 2) if e.radius_error_std > 0 else np.ones(2)
+        self._radius_scale = 1.0 + self.rng_motion.normal(0.0, e.radius_error_std, 2) if e.radius_error_std > 0 else np.ones(2)
         self._blocked = False
         self.collisions = 0
         self.distance_m = 0.0
         self._robot_synced = False
+        self._noise_banks: dict[tuple, NDArray[np.int16]] = {}
 
     @property
     def wheel_angles(self) -> tuple[float, float]:
@@ -289,7 +294,7 @@ class SimWorld:
         b_slip = e.slip_std * math.sqrt(max(1.0 - a_slip * a_slip, 0.0))
         r = self.robot_model.wheel_radius_m
         sep = self.robot_model.wheel_separation_m
-        rng = self.rng
+        rng = self.rng_motion
         for _ in range(int(n)):
             self._omega += (self._omega_cmd - self._omega) * k_motor
             if b_slip > 0:
@@ -329,7 +334,7 @@ class SimWorld:
         e = self.config.encoders
         phi = self._phi.copy()
         if e.noise_std_rad > 0:
-            phi = phi + self.rng.normal(0.0, e.noise_std_rad, 2)
+            phi = phi + self.rng_encoders.normal(0.0, e.noise_std_rad, 2)
         if e.resolution_rad > 0:
             phi = np.round(phi / e.resolution_rad) * e.resolution_rad
         return WheelEncoders(stamp=self.time, left_rad=float(phi[0]), right_rad=float(phi[1]))
@@ -357,7 +362,7 @@ class SimWorld:
         ranges = frac * c.range_max_m
         hit = np.isfinite(ranges)
         if c.noise_std_m > 0:
-            ranges[hit] += self.rng.normal(0.0, c.noise_std_m, int(hit.sum()))
+            ranges[hit] += self.rng_lidar.normal(0.0, c.noise_std_m, int(hit.sum()))
         with np.errstate(invalid="ignore"):
             ranges[hit & (ranges > c.range_max_m)] = np.inf
             ranges[hit & (ranges < c.range_min_m)] = -np.inf
@@ -408,11 +413,25 @@ class SimWorld:
         self._sync_robot()
         T = self.T_world_base3() @ self.robot_model.T_base_camera_optical
         frame = self._render(T, int(width), int(height), depth=depth, segmentation=segmentation)
-        sigma = self.config.camera.noise_std
+        sigma = float(self.config.camera.noise_std)
         if sigma > 0:
-            noisy = frame.image.data.astype(np.float32) + self.rng.normal(0.0, sigma, frame.image.data.shape).astype(np.float32)
-            frame.image = Image(stamp=frame.stamp, data=np.clip(noisy + 0.5, 0, 255).astype(np.uint8))
+            frame.image = Image(stamp=frame.stamp, data=self._add_pixel_noise(frame.image.data, sigma))
         return frame
+
+    def _add_pixel_noise(self, rgb: NDArray[np.uint8], sigma: float) -> NDArray[np.uint8]:
+        """Gaussian pixel noise σ (0–255), cheaply: a random window of a per-size noise bank
+        (drawing ~10⁶ normals per 640×480 frame would cost more than half a render)."""
+        h, w, _ = rgb.shape
+        key = (h, w, sigma)
+        bank = self._noise_banks.get(key)
+        if bank is None:
+            bank = np.round(self.rng_camera.normal(0.0, sigma, (h + 61, w + 67, 3))).astype(np.int16)
+            self._noise_banks = {key: bank}
+        dy = int(self.rng_camera.integers(0, bank.shape[0] - h + 1))
+        dx = int(self.rng_camera.integers(0, bank.shape[1] - w + 1))
+        out = rgb.astype(np.int16)
+        out += bank[dy : dy + h, dx : dx + w]
+        return np.clip(out, 0, 255).astype(np.uint8)
 
     def render_view(
         self,

@@ -186,3 +186,15 @@ def test_cli_random_and_validate(tmp_path, capsys):
     assert cli_main(["world", "validate", str(tmp_path / "bad.yaml")]) == 2
     assert "unknown class 'unicorn'" in capsys.readouterr().err
     assert ROBOT_RADIUS_M == Config().robot.footprint_radius_m
+
+
+def test_documented_example_and_bundled_worlds_are_valid():
+    import re
+
+    text = Path("docs/world-format.md").read_text()
+    example = re.search(r"```yaml\n(.*?)```", text, re.S).group(1)
+    w = world_from_dict(yaml.safe_load(example), "docs/world-format.md")
+    validate_world(w)
+    assert {o.label for o in w.objects} == {"dog", "chair", "door", "ball"}
+    for f in sorted(Path("assets/worlds").glob("*.yaml")):
+        load_world(f)

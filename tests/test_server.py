@@ -1,0 +1,98 @@
+"""The web server on port 0: starts, streams the scene to protocol-level clients, drives, stops cleanly."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from app.bench.wsclient import FakeViserClient
+from app.config import Config
+from app.server import OcslamApp
+
+
+def wait_for(cond, timeout=20.0, what="condition"):
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if cond():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.fixture()
+def app():
+    cfg = Config.load(None, ["detector.kind=none", "server.port=0"])
+    a = OcslamApp(cfg).start()
+    try:
+        yield a
+    finally:
+        a.stop()
+
+
+def test_server_starts_on_a_free_port_and_stops_cleanly() -> None:
+    before = {t.name for t in threading.enumerate()}
+    cfg = Config.load(None, ["detector.kind=none", "server.port=0"])
+    a = OcslamApp(cfg).start()
+    assert a.port > 0 and a.url == f"http://127.0.0.1:{a.port}"
+    assert a.server.get_host() == "127.0.0.1"
+    wait_for(lambda: a.pipeline.time > 0.5, what="the sim to advance")
+    a.stop()
+    time.sleep(0.5)
+    leftover = {t.name for t in threading.enumerate() if t.is_alive()} - before
+    assert "ocslam-loop" not in leftover
+    assert a.loop_error is None
+
+
+def test_clients_see_the_scene_and_teleop_drives(app) -> None:
+    c1 = FakeViserClient(app.port).connect()
+    c2 = FakeViserClient(app.port).connect()
+    try:
+        wait_for(lambda: "Forward" in c1.stats.labels and "Forward" in c2.stats.labels, what="the GUI")
+        wait_for(lambda: len(app.server.get_clients()) == 2, what="two clients")
+        assert c1.stats.message_types.get("PointCloudMessage", 0) >= 1  # LIDAR layer
+        start = app.pipeline.sim.true_pose()
+        for _ in range(10):  # a held button: ~10 Hz on_hold events, deadman keeps it moving
+            c2.click("Forward")
+            time.sleep(0.1)
+        wait_for(lambda: app.pipeline.sim.true_pose().distance(start) > 0.1, what="the robot to move forward")
+        moved = app.pipeline.sim.true_pose()
+        dx = start.between(moved)
+        assert dx.x > 0.1 and abs(dx.y) < 0.05  # forward in base_footprint (REP-103: +x)
+        # a client vanishing mid-stream leaves the loop and the other client untouched
+        c1.abort()
+        t0, f0 = app.pipeline.time, c2.stats.frames
+        wait_for(lambda: app.pipeline.time > t0 + 1.0 and c2.stats.frames > f0 + 5, what="the loop to continue")
+        wait_for(lambda: len(app.server.get_clients()) == 1, what="the dropped client to be gone")
+        assert app.loop_error is None
+    finally:
+        c1.close()
+        c2.close()
+
+
+def test_keyboard_teleop_bindings_and_deadman(app) -> None:
+    t = app.teleop
+    assert t.press("i").linear_x > 0 and t.command().angular_z == 0
+    assert t.press(",").linear_x < 0
+    assert t.press("j").angular_z > 0 and t.press("l").angular_z < 0
+    u, o = t.press("u"), t.press("o")
+    assert u.linear_x > 0 < u.angular_z and o.linear_x > 0 > o.angular_z
+    m, dot = t.press("m"), t.press(".")
+    assert m.linear_x < 0 > m.angular_z and dot.linear_x < 0 < dot.angular_z
+    t.press("space")
+    assert t.command().linear_x == 0 and not t.active
+
+
+def test_deadman_expires() -> None:
+    from app.ui.teleop import Teleop
+
+    now = [0.0]
+    t = Teleop(0.2, 1.0, deadman_s=0.6, clock=lambda: now[0])
+    t.press("i")
+    now[0] = 0.5
+    assert t.command().linear_x == pytest.approx(0.2)
+    now[0] = 0.61
+    assert t.command().linear_x == 0.0
+    t.press("w")  # not a teleop key (viser's camera owns WASD)
+    assert t.command().linear_x == 0.0

@@ -13,7 +13,12 @@ Objects that are visible but fail these tests are returned as *ignore* regions: 
 labels (a sliver of a table leg is no "table"), and the benchmark does not count a detection on them as
 a false positive (COCO ``iscrowd``).
 
-Everything here is numpy; nothing imports pybullet.
+``full_pixels`` comes from :class:`SilhouetteRenderer`: each object is built *alone* in its own small
+pybullet client (from the same catalogue parts as the simulator) and rendered through an off-centre
+projection (:func:`frustum_matrix`) that covers exactly the window of its projected bounding box on the
+camera's image plane extended past the frame, at the same pixel scale. Occlusion by anything and
+truncation by the frame edge both lower the fraction, with the same rasteriser on both sides of the
+ratio, so a fully visible object scores 1.0. The rest of this module is numpy only.
 """
 
 from __future__ import annotations
@@ -33,16 +38,27 @@ __all__ = [
     "yolo_lines",
     "silhouette_window",
     "frustum_matrix",
+    "SilhouetteRenderer",
 ]
 
 
 @dataclass(frozen=True, slots=True)
 class LabelFilter:
-    """When a visible object becomes a label (defaults measured to help: see docs/detector.md)."""
+    """When a visible object becomes a label (defaults measured to help: see docs/detector.md).
 
-    min_pixels: int = 40
+    ``min_pixels`` and ``min_box_px`` are measured in the image scaled to ``reference_width`` (the
+    detector's 224-px input), so the same objects are labelled whatever the render size.
+    """
+
+    min_pixels: float = 30.0
     min_visible_fraction: float = 0.35
-    min_box_px: float = 6.0
+    min_box_px: float = 8.0
+    reference_width: int = 224
+
+    def scaled(self, image_width: int) -> tuple[float, float]:
+        """``(min_pixels, min_box_px)`` in pixels of an image ``image_width`` wide."""
+        k = image_width / float(self.reference_width)
+        return self.min_pixels * k * k, self.min_box_px * k
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,11 +124,12 @@ def make_labels(
     ``full_pixels`` maps object id → unoccluded silhouette area (missing: the visible area, i.e. fraction 1).
     """
     out = []
+    min_pixels, min_box = filt.scaled(np.shape(segmentation)[1])
     for oid, (x1, y1, x2, y2, n) in sorted(visible_boxes(segmentation).items()):
         if oid not in class_of:
             continue
         full = max(int(full_pixels.get(oid, n)), n)
-        keep = n >= filt.min_pixels and n / full >= filt.min_visible_fraction and min(x2 - x1, y2 - y1) >= filt.min_box_px
+        keep = n >= min_pixels and n / full >= filt.min_visible_fraction and min(x2 - x1, y2 - y1) >= min_box
         out.append(ObjectLabel(oid, int(class_of[oid]), x1, y1, x2, y2, n, full, bool(keep)))
     return out
 
@@ -187,3 +204,100 @@ def frustum_matrix(
     m[2, 3] = -2 * far * near / (far - near)
     m[3, 2] = -1.0
     return m.T.ravel().tolist()  # column-major
+
+
+class SilhouetteRenderer:
+    """Unoccluded, untruncated pixel areas of a world's objects, for any camera pose.
+
+    One pybullet DIRECT client per object (created on first use, geometry from
+    ``app.world_models.build_model_pybullet`` exactly as the simulator builds it), so a render costs
+    only that object's triangles and the window's pixels. Close it (or use it as a context manager)
+    to free the clients.
+    """
+
+    def __init__(self, world, near: float = 0.05, far: float = 20.0) -> None:
+        self.world = world
+        self.near, self.far = float(near), float(far)
+        self._clients: dict[int, tuple[int, list[int], NDArray[np.float64]]] = {}
+
+    def _client(self, oid: int) -> tuple[int, list[int], NDArray[np.float64]]:
+        if oid not in self._clients:
+            import pybullet as p
+
+            from app.world_models import build_model_pybullet
+
+            o = self.world.objects[oid]
+            cid = p.connect(p.DIRECT)
+            bodies = [b for b, _ in build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, scale=o.scale)]
+            lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+            for b in bodies:
+                a0, a1 = p.getAABB(b, -1, physicsClientId=cid)
+                lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
+            corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            self._clients[oid] = (cid, bodies, corners)
+        return self._clients[oid]
+
+    def counts(
+        self,
+        T_world_camera: NDArray[np.float64],
+        K: NDArray[np.float64],
+        width: int,
+        height: int,
+        object_ids,
+        *,
+        margin: float = 1.0,
+        max_pixels: int | None = None,
+    ) -> dict[int, int]:
+        """``{object id: pixel area}`` of each object alone in the camera ``K`` at ``T_world_camera``
+        (optical frame, z forward), on the image plane extended ``margin`` frame sizes past each edge.
+        Windows larger than ``max_pixels`` (default 16384: counts to about 1 %) are rendered coarser and
+        scaled back."""
+        import pybullet as p
+
+        T = np.asarray(T_world_camera, dtype=np.float64)
+        T_cam_world = np.linalg.inv(T)
+        eye = T[:3, 3]
+        max_pixels = int(max_pixels or 16384)
+        out: dict[int, int] = {}
+        for oid in object_ids:
+            oid = int(oid)
+            if not 0 <= oid < len(self.world.objects):
+                continue
+            cid, bodies, corners = self._client(oid)
+            win = silhouette_window((T_cam_world @ corners.T).T[:, :3], K, width, height, self.near, margin)
+            if win is None:
+                out[oid] = 0
+                continue
+            u0, v0, u1, v1 = win
+            w, h = u1 - u0, v1 - v0
+            s = max(1.0, math.sqrt(w * h / max_pixels))
+            rw, rh = max(1, int(math.ceil(w / s))), max(1, int(math.ceil(h / s)))
+            view = p.computeViewMatrix(eye.tolist(), (eye + T[:3, 2]).tolist(), (-T[:3, 1]).tolist(), physicsClientId=cid)
+            seg = p.getCameraImage(
+                rw, rh, view, frustum_matrix(K, win, self.near, self.far), renderer=p.ER_TINY_RENDERER, physicsClientId=cid
+            )[4]
+            n = int(np.count_nonzero(np.asarray(seg) >= 0))
+            out[oid] = int(round(n * (w * h) / (rw * rh)))
+        return out
+
+    def close(self) -> None:
+        import pybullet as p
+
+        for cid, _, _ in self._clients.values():
+            try:
+                p.disconnect(cid)
+            except Exception:
+                pass
+        self._clients.clear()
+
+    def __enter__(self) -> "SilhouetteRenderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass

@@ -43,7 +43,7 @@ def test_make_labels_filters_by_pixels_fraction_and_size() -> None:
     seg[80:82, 0:40] = 3  # 80 px but only 2 px tall → ignore
     seg[90:95, 90:95] = 4  # 25 px → ignore
     seg[0:5, 60:70] = 9  # not a classified object (wall, distractor): no label at all
-    labels = make_labels(seg, {1: 0, 2: 3, 3: 5, 4: 6}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.35, min_box_px=4))
+    labels = make_labels(seg, {1: 0, 2: 3, 3: 5, 4: 6}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.35, min_box_px=4, reference_width=100))
     by = {lb.object_id: lb for lb in labels}
     assert set(by) == {1, 2, 3, 4}
     assert by[1].keep and by[1].visible_fraction == 1.0
@@ -51,8 +51,13 @@ def test_make_labels_filters_by_pixels_fraction_and_size() -> None:
     assert not by[3].keep and not by[4].keep
     assert yolo_lines(labels, 100, 100) == ["0 0.200000 0.200000 0.200000 0.200000"]
     # A looser fraction threshold keeps the occluded object, with its visible box.
-    loose = make_labels(seg, {2: 3}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.1, min_box_px=4))
+    loose = make_labels(seg, {2: 3}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.1, min_box_px=4, reference_width=100))
     assert loose[0].keep and (loose[0].x1, loose[0].y1, loose[0].x2, loose[0].y2) == (50, 50, 90, 60)
+    # Thresholds are in pixels of the reference width: the same mask at twice the resolution keeps
+    # the same objects.
+    big = np.kron(seg, np.ones((2, 2), np.int32))
+    f = LabelFilter(min_pixels=40, min_visible_fraction=0.35, min_box_px=4, reference_width=100)
+    assert [lb.keep for lb in make_labels(big, {1: 0, 3: 5, 4: 6}, {}, f)] == [True, False, False]
 
 
 def test_silhouette_window_projects_and_extends() -> None:
@@ -98,3 +103,57 @@ def test_window_render_equals_a_crop_of_the_full_render() -> None:
         assert np.mean(part == crop) > 0.99
     finally:
         p.disconnect(cid)
+
+
+def _sphere_box(c_cam: np.ndarray, r: float, K: np.ndarray) -> tuple[float, float, float, float]:
+    """Exact image box of a sphere (centre ``c_cam`` in the optical frame): the tangent planes through
+    the camera centre that contain the image's vertical (horizontal) direction."""
+    def extent(a: float, z: float, f: float, c: float) -> tuple[float, float]:
+        # planes a = m z tangent to the sphere: (a - m z)^2 = r^2 (1 + m^2)
+        A, B, C = z * z - r * r, -2 * a * z, a * a - r * r
+        d = np.sqrt(B * B - 4 * A * C)
+        m1, m2 = (-B - d) / (2 * A), (-B + d) / (2 * A)
+        return c + f * min(m1, m2), c + f * max(m1, m2)
+
+    u0, u1 = extent(c_cam[0], c_cam[2], K[0, 0], K[0, 2])
+    v0, v1 = extent(c_cam[1], c_cam[2], K[1, 1], K[1, 2])
+    return u0, v0, u1, v1
+
+
+def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
+    from app.config import Config
+    from app.labels import SilhouetteRenderer
+    from app.ocslam.messages import CLASS_INDEX
+    from app.ocslam.se2 import Pose2
+    from app.sim_world import SimWorld
+    from app.worlds import World, WorldObject
+
+    world = World(
+        name="tiny",
+        objects=[
+            WorldObject("ball", "play_ball", 2.0, 0.25),  # fully visible
+            WorldObject("duck", "rubber_duck", 3.2, 0.57),  # behind the ball's left edge: partly hidden
+            WorldObject("ball", "play_ball", 2.0, -1.15),  # at the right edge: half out of the frame
+            WorldObject("gnome", "gnome", -2.0, 0.0),  # behind the camera
+        ],
+    )
+    W, H = 320, 240
+    with SimWorld(world, Config()) as sim, SilhouetteRenderer(world) as sil:
+        frame = sim.render_view(Pose2(0.0, 0.0, 0.0), width=W, height=H, camera_z=0.11, segmentation=True)
+        class_of = {i: CLASS_INDEX[o.label] for i, o in enumerate(world.objects)}
+        vis = visible_boxes(frame.segmentation)
+        full = sil.counts(frame.T_world_camera, frame.info.K, W, H, list(vis))
+        labels = {lb.object_id: lb for lb in make_labels(frame.segmentation, class_of, full, LabelFilter(40, 0.35, 4, reference_width=W))}
+    assert set(labels) == {0, 1, 2}  # the gnome behind the camera is not seen
+    # The fully visible ball: its exact projected sphere box, visible fraction 1.
+    c_world = np.array([2.0, 0.25, 0.11, 1.0])
+    c_cam = (np.linalg.inv(frame.T_world_camera) @ c_world)[:3]
+    u0, v0, u1, v1 = _sphere_box(c_cam, 0.1115, frame.info.K)
+    ball = labels[0]
+    assert ball.keep and ball.class_id == CLASS_INDEX["ball"]
+    np.testing.assert_allclose([ball.x1, ball.y1, ball.x2, ball.y2], [u0, v0, u1, v1], atol=1.5)
+    assert ball.visible_fraction == pytest.approx(1.0, abs=0.02)
+    # The duck behind it is partly occluded; the right ball is truncated at the frame edge.
+    assert 0.0 < labels[1].visible_fraction < 0.9
+    right = labels[2]
+    assert right.x2 == W and 0.2 < right.visible_fraction < 0.8

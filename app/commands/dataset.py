@@ -1,0 +1,75 @@
+"""Render an auto-labelled YOLO dataset from random worlds and the paper's apartment (split by world).
+
+    ocslam dataset --worlds 40 --per-world 50 --seed 1 --out datasets/sim [--workers 2] [--imgsz 320x240]
+
+World i is random_world(1000·seed + i); a seeded share of them (--val-fraction) is the validation split,
+the apartment is training data. Labels are the tight boxes of each object's visible pixels, kept when
+at least --min-pixels are visible and at least --min-visible of the object (see docs/detector.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--worlds", type=int, default=40, help="random worlds")
+    p.add_argument("--per-world", type=int, default=50, help="images per random world")
+    p.add_argument("--seed", type=int, default=1, help="dataset seed (world i is random_world(1000·seed + i))")
+    p.add_argument("--out", type=Path, required=True, help="output folder (e.g. datasets/sim)")
+    p.add_argument("--workers", type=int, default=2, help="rendering processes")
+    p.add_argument("--imgsz", default="320x240", help="render size W×H")
+    p.add_argument("--val-fraction", type=float, default=0.15, help="share of random worlds used for validation")
+    p.add_argument("--no-apartment", action="store_true", help="leave out the paper's apartment")
+    p.add_argument("--apartment-images", type=int, default=None, help="images of the apartment (default 2 × per-world)")
+    p.add_argument(
+        "--min-pixels", type=float, default=30.0, help="label only objects with this many visible pixels (in the image scaled to 224 px wide)"
+    )
+    p.add_argument("--min-visible", type=float, default=0.35, help="label only objects at least this fraction visible")
+    p.add_argument(
+        "--min-box", type=float, default=8.0, help="label only boxes whose shorter side is this long (px, image scaled to 224 px wide)"
+    )
+    p.add_argument("--no-randomize", action="store_true", help="no domain randomisation (plain renders)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from app.dataset import DatasetOptions, build_dataset, command_line, parse_imgsz
+    from app.labels import LabelFilter
+
+    if args.worlds < 0 or args.per_world < 1:
+        print("ocslam dataset: --worlds must be ≥ 0 and --per-world ≥ 1", file=sys.stderr)
+        return 2
+    if not 0.0 <= args.val_fraction <= 1.0 or not 0.0 <= args.min_visible <= 1.0:
+        print("ocslam dataset: --val-fraction and --min-visible must be in [0, 1]", file=sys.stderr)
+        return 2
+    try:
+        imgsz = parse_imgsz(args.imgsz)
+    except ValueError as e:
+        print(f"ocslam dataset: {e}", file=sys.stderr)
+        return 2
+    opts = DatasetOptions(
+        out=args.out,
+        worlds=args.worlds,
+        per_world=args.per_world,
+        seed=args.seed,
+        imgsz=imgsz,
+        workers=max(1, args.workers),
+        val_fraction=args.val_fraction,
+        apartment=not args.no_apartment,
+        apartment_images=args.apartment_images,
+        label_filter=LabelFilter(args.min_pixels, args.min_visible, args.min_box),
+        randomize=not args.no_randomize,
+        command=command_line(),
+    )
+    meta = build_dataset(opts, progress=not args.quiet)
+    print(
+        f"wrote {args.out}: {meta['images']['train']} train / {meta['images']['val']} val images, "
+        f"{meta['boxes']['train']} / {meta['boxes']['val']} boxes, "
+        f"{len(meta['train_worlds'])} / {len(meta['val_worlds'])} worlds, {meta['render_s']:.0f} s"
+    )
+    for split in ("train", "val"):
+        print(f"  {split}: " + ", ".join(f"{k} {v}" for k, v in meta["class_counts"][split].items()))
+    return 0

@@ -1,0 +1,649 @@
+"""Auto-labelled YOLO datasets rendered by the simulator (``ocslam dataset``).
+
+For each world (random apartments from ``random_world(seed)`` and, for training, the paper's apartment)
+one process renders camera views at robot height: looking at objects from all sides and distances
+(often off-centre, so objects are truncated by the frame edge), along the world's routes, and from
+random free poses. Labels come from the segmentation mask (:mod:`app.labels`): the tight box of each
+object's visible pixels, kept when enough of the object is visible.
+
+**Visible fraction.** ``visible pixels / unoccluded pixels``. The unoccluded count comes from a second
+render of the object *alone* (its own small pybullet client) through an off-centre projection that
+covers exactly the object's projected bounding box on the camera's image plane extended past the frame,
+at the same pixel scale (:class:`app.labels.SilhouetteRenderer`). Occlusion by other geometry and
+truncation by the frame edge therefore both lower the fraction, with the renderer's own rasterisation
+on both sides of the ratio (a fully visible object scores 1.0).
+
+**Domain randomisation** (per world, re-drawn every ``rerandomize_every`` images): light direction,
+colour and intensity (ambient/diffuse/specular, sometimes shadows); floor and wall colours and
+procedural textures (planks, tiles, checker, carpet noise, stripes, plain) on overlay meshes; object
+colour jitter; distractor objects of no class (``pybullet_data/random_urdfs``, scaled and recoloured);
+camera height and pitch jitter; sensor effects (gamma/contrast/colour balance, blur, motion blur,
+Gaussian noise).
+
+**Split by world**: a seeded choice of random worlds is the validation split; the apartment is always
+training data; no world is in both. World ``i`` of a dataset made with ``--seed S`` is
+``random_world(1000·S + i)``, so datasets with different seeds share no world.
+
+Output (``DIR``): ``images/{train,val}/*.png``, ``labels/{train,val}/*.txt`` (YOLO), ``data.yaml``
+(ultralytics; the 11 classes in ``CLASS_NAMES`` order; an ``ocslam`` block with the command, seed and
+counts), ``annotations_{train,val}.json`` (COCO, with not-kept visible objects as ``iscrowd`` ignore
+regions and each box's visible fraction) for ``ocslam bench detector``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import os
+import queue as queue_mod
+import shlex
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import cv2
+import numpy as np
+import yaml
+
+from app.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes, yolo_lines
+from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
+
+__all__ = [
+    "DatasetOptions",
+    "build_dataset",
+    "load_samples",
+    "parse_imgsz",
+    "plan_worlds",
+    "render_world",
+]
+
+APARTMENT = "assets/worlds/apartment.yaml"
+
+
+@dataclass
+class DatasetOptions:
+    out: Path
+    worlds: int = 40
+    per_world: int = 50
+    seed: int = 1
+    imgsz: tuple[int, int] = (320, 240)
+    workers: int = 2
+    val_fraction: float = 0.15
+    apartment: bool = True
+    apartment_images: int | None = None  # default: 2 × per_world
+    label_filter: LabelFilter = field(default_factory=LabelFilter)
+    randomize: bool = True
+    distractors: tuple[int, int] = (2, 8)
+    rerandomize_every: int = 10
+    empty_keep_prob: float = 0.15  # keep this share of views in which no object is labelled
+    command: str | None = None
+
+
+def parse_imgsz(s: str | Sequence[int]) -> tuple[int, int]:
+    """``"320x240"`` / ``"320×240"`` / ``(320, 240)`` → ``(320, 240)``."""
+    if not isinstance(s, str):
+        w, h = s
+        return int(w), int(h)
+    parts = s.lower().replace("×", "x").split("x")
+    if len(parts) != 2:
+        raise ValueError(f"image size must be W×H (e.g. 320x240), got {s!r}")
+    w, h = int(parts[0]), int(parts[1])
+    if not (32 <= w <= 4096 and 24 <= h <= 4096):
+        raise ValueError(f"image size {w}×{h} is out of range")
+    return w, h
+
+
+# ----------------------------------------------------------------------------------------------
+# Worlds and the split
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class WorldTask:
+    index: int  # position in the dataset (file name prefix)
+    kind: str  # "random" | "apartment"
+    world_seed: int  # random_world seed (random) or 0
+    split: str  # "train" | "val"
+    images: int
+
+
+def plan_worlds(opts: DatasetOptions) -> list[WorldTask]:
+    """The dataset's worlds and their split: validation worlds are a seeded choice of random worlds."""
+    n = int(opts.worlds)
+    rng = np.random.default_rng([int(opts.seed), 0xDA7A])
+    n_val = int(round(opts.val_fraction * n))
+    if opts.val_fraction > 0 and n >= 2:
+        n_val = min(max(n_val, 1), n if opts.val_fraction >= 1.0 else n - 1)
+    elif opts.val_fraction >= 1.0:
+        n_val = n
+    val = set(rng.permutation(n)[:n_val].tolist()) if n_val else set()
+    tasks = [
+        WorldTask(i, "random", 1000 * int(opts.seed) + i, "val" if i in val else "train", int(opts.per_world))
+        for i in range(n)
+    ]
+    if opts.apartment:
+        k = opts.apartment_images if opts.apartment_images is not None else 2 * int(opts.per_world)
+        tasks.append(WorldTask(n, "apartment", 0, "train", int(k)))
+    return tasks
+
+
+# ----------------------------------------------------------------------------------------------
+# Domain randomisation
+# ----------------------------------------------------------------------------------------------
+
+
+def _hsv(h: float, s: float, v: float) -> tuple[float, float, float]:
+    import colorsys
+
+    return colorsys.hsv_to_rgb(h % 1.0, min(max(s, 0), 1), min(max(v, 0), 1))
+
+
+def make_texture(kind: str, rng: np.random.Generator, size: int = 128) -> np.ndarray:
+    """A procedural ``(size, size, 3)`` uint8 RGB texture that tiles: planks, tiles, checker, carpet,
+    stripes, marble or plain."""
+    base = np.array(_hsv(rng.random(), rng.uniform(0.05, 0.6), rng.uniform(0.3, 0.95)))
+    alt = np.array(_hsv(rng.random(), rng.uniform(0.0, 0.6), rng.uniform(0.2, 0.95)))
+    yy, xx = np.mgrid[0:size, 0:size] / size
+    grain = rng.normal(0.0, 1.0, (size, size))
+    if kind == "planks":
+        n = int(rng.integers(3, 9))
+        band = np.floor(yy * n).astype(int)
+        tint = rng.uniform(0.8, 1.15, n)[band]
+        line = (np.abs((yy * n) % 1.0) < 0.04) * 0.35
+        g = cv2.GaussianBlur(grain, (0, 0), sigmaX=6, sigmaY=0.7) * 0.25
+        img = base[None, None] * (tint * (1 + g) * (1 - line))[..., None]
+    elif kind == "tiles":
+        n = int(rng.integers(2, 6))
+        grout = ((xx * n) % 1.0 < 0.05) | ((yy * n) % 1.0 < 0.05)
+        img = np.where(grout[..., None], alt[None, None] * 0.6, base[None, None] * (1 + 0.05 * grain[..., None]))
+    elif kind == "checker":
+        n = int(rng.integers(2, 5)) * 2
+        c = ((np.floor(xx * n) + np.floor(yy * n)) % 2).astype(bool)
+        img = np.where(c[..., None], base[None, None], alt[None, None])
+    elif kind == "carpet":
+        g = cv2.GaussianBlur(grain, (0, 0), 1.2)
+        img = base[None, None] * (1 + 0.35 * g[..., None] / max(g.std(), 1e-6) * 0.3)
+    elif kind == "stripes":
+        n = int(rng.integers(4, 16))
+        c = (np.floor(xx * n) % 2).astype(bool)
+        img = np.where(c[..., None], base[None, None], base[None, None] * 0.5 + alt[None, None] * 0.5)
+    elif kind == "marble":
+        g = cv2.GaussianBlur(grain, (0, 0), 10)
+        g = g / max(np.abs(g).max(), 1e-6)
+        v = 0.5 + 0.5 * np.sin((xx + yy) * 12 + 6 * g)
+        img = base[None, None] * (1 - 0.3 * v[..., None]) + alt[None, None] * 0.3 * v[..., None]
+    else:  # plain
+        img = np.broadcast_to(base[None, None], (size, size, 3)) * (1 + 0.03 * grain[..., None])
+    return np.clip(img * 255.0, 0, 255).astype(np.uint8)
+
+
+TEXTURE_KINDS = ("planks", "tiles", "checker", "carpet", "stripes", "marble", "plain")
+
+
+def _quad_mesh_args(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]) -> dict[str, Any]:
+    """pybullet ``createVisualShape(GEOM_MESH, ...)`` arguments for planar quads ``(origin, u_vec, v_vec, tile)``
+    (corners ``o``, ``o+u``, ``o+u+v``, ``o+v``), texture repeating every ``tile`` metres."""
+    verts, idx, uvs, normals = [], [], [], []
+    for o, u, v, tile in quads:
+        n = np.cross(u, v)
+        n = n / (np.linalg.norm(n) or 1.0)
+        k = len(verts)
+        lu, lv = np.linalg.norm(u) / tile, np.linalg.norm(v) / tile
+        for c, uv in ((o, (0, 0)), (o + u, (lu, 0)), (o + u + v, (lu, lv)), (o + v, (0, lv))):
+            verts.append(c.tolist())
+            uvs.append(list(uv))
+            normals.append(n.tolist())
+        idx += [k, k + 1, k + 2, k, k + 2, k + 3]
+    return dict(vertices=verts, indices=idx, uvs=uvs, normals=normals)
+
+
+class Randomizer:
+    """Domain randomisation of one :class:`SimWorld` (all changes through ``sim.client``)."""
+
+    def __init__(self, sim, rng: np.random.Generator, tmpdir: Path, distractors: tuple[int, int] = (2, 8)) -> None:
+        import pybullet as p
+
+        self.p, self.sim, self.rng, self.cid = p, sim, rng, sim.client
+        self.tmpdir = Path(tmpdir)
+        self.n_distractors = distractors
+        self.distractor_bodies: list[int] = []
+        self.distractor_discs: list[tuple[float, float, float]] = []
+        self._tex_count = 0
+        self.original_rgba = {
+            b: tuple(p.getVisualShapeData(b, physicsClientId=self.cid)[0][7])
+            for ids in sim.object_body_ids.values()
+            for b in ids
+            if p.getVisualShapeData(b, physicsClientId=self.cid)
+        }
+        import pybullet_data
+
+        self.urdfs = sorted((Path(pybullet_data.getDataPath()) / "random_urdfs").glob("*/*.urdf"))
+        self._blocking = None
+        self.floor_overlay = self._make_floor_overlay()
+        self.wall_overlay = self._make_wall_overlay()
+
+    # -- overlays (textured surfaces) --------------------------------------------------------
+    def _make_floor_overlay(self) -> int:
+        p, cid = self.p, self.cid
+        xmin, ymin, xmax, ymax = self.sim.world.bounds()
+        o = np.array([xmin - 1, ymin - 1, 0.0008])
+        args = _quad_mesh_args([(o, np.array([xmax - xmin + 2, 0, 0]), np.array([0, ymax - ymin + 2, 0]), 1.0)])
+        vs = p.createVisualShape(p.GEOM_MESH, physicsClientId=cid, **args)
+        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
+
+    def _make_wall_overlay(self) -> int | None:
+        p, cid = self.p, self.cid
+        quads = []
+        for wall in self.sim.world.walls:
+            c, s = math.cos(wall.yaw), math.sin(wall.yaw)
+            d = np.array([c, s, 0.0])
+            nrm = np.array([-s, c, 0.0])
+            for s0, s1, z0, z1, th, _ in wall.boxes():
+                for side in (1.0, -1.0):
+                    base = np.array([*wall.point_at(s0), z0]) + side * nrm * (th / 2 + 0.002)
+                    u = d * (s1 - s0)
+                    v = np.array([0, 0, z1 - z0])
+                    # outward normal: u × v must point along side·nrm
+                    if np.dot(np.cross(u, v), side * nrm) < 0:
+                        quads.append((base + u, -u, v, 1.0))
+                    else:
+                        quads.append((base, u, v, 1.0))
+        if not quads:
+            return None
+        vs = p.createVisualShape(p.GEOM_MESH, physicsClientId=cid, **_quad_mesh_args(quads))
+        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
+
+    def _texture(self, kinds: Sequence[str] = TEXTURE_KINDS) -> int:
+        img = make_texture(str(self.rng.choice(list(kinds))), self.rng)
+        path = self.tmpdir / f"tex{self._tex_count}.png"
+        self._tex_count += 1
+        cv2.imwrite(str(path), img[:, :, ::-1])
+        return self.p.loadTexture(str(path), physicsClientId=self.cid)
+
+    # -- scene -------------------------------------------------------------------------------
+    def randomize_scene(self) -> None:
+        p, cid, rng = self.p, self.cid, self.rng
+        # floor and walls: a texture (or plain colour) on the overlays
+        p.changeVisualShape(self.floor_overlay, -1, textureUniqueId=self._texture(), rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        if self.wall_overlay is not None:
+            kinds = ("plain", "plain", "stripes", "tiles", "marble", "carpet")
+            p.changeVisualShape(self.wall_overlay, -1, textureUniqueId=self._texture(kinds), rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        # object colours: jitter every part around its catalogue colour, sometimes a bold new hue
+        for b, rgba in self.original_rgba.items():
+            if rng.random() < 0.12:
+                rgb = _hsv(rng.random(), rng.uniform(0.2, 0.9), rng.uniform(0.25, 0.95))
+            else:
+                import colorsys
+
+                h, s, v = colorsys.rgb_to_hsv(*[min(max(c, 0.0), 1.0) for c in rgba[:3]])
+                rgb = _hsv(h + rng.uniform(-0.04, 0.04), s * rng.uniform(0.7, 1.3), v * rng.uniform(0.7, 1.25))
+            p.changeVisualShape(b, -1, rgbaColor=[*rgb, 1.0], physicsClientId=cid)
+        self._place_distractors()
+
+    def _blocking_union(self):
+        if self._blocking is None:
+            from shapely.ops import unary_union
+
+            self._blocking = unary_union([g for _, g in self.sim.world.blocking_geometry()])
+        return self._blocking
+
+    def _place_distractors(self) -> None:
+        p, cid, rng = self.p, self.cid, self.rng
+        for b in self.distractor_bodies:
+            p.removeBody(b, physicsClientId=cid)
+        self.distractor_bodies, self.distractor_discs = [], []
+        if not self.urdfs or self.n_distractors[1] <= 0:
+            return
+        from shapely.geometry import Point
+
+        blocking = self._blocking_union()
+        xmin, ymin, xmax, ymax = self.sim.world.bounds()
+        want = int(rng.integers(self.n_distractors[0], self.n_distractors[1] + 1))
+        tries = 0
+        while len(self.distractor_bodies) < want and tries < want * 8:
+            tries += 1
+            urdf = self.urdfs[int(rng.integers(len(self.urdfs)))]
+            scale = float(rng.uniform(2.0, 7.0))
+            x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
+            q = p.getQuaternionFromEuler([0, 0, rng.uniform(-math.pi, math.pi)])
+            try:
+                b = p.loadURDF(str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, physicsClientId=cid)
+            except Exception:
+                continue
+            lo, hi = p.getAABB(b, -1, physicsClientId=cid)
+            for j in range(p.getNumJoints(b, physicsClientId=cid)):
+                a0, a1 = p.getAABB(b, j, physicsClientId=cid)
+                lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
+            r = 0.5 * math.hypot(hi[0] - lo[0], hi[1] - lo[1])
+            cx, cy = (lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2
+            if r > 0.6 or blocking.intersects(Point(cx, cy).buffer(r + 0.05)) or any(
+                math.hypot(cx - dx, cy - dy) < r + dr for dx, dy, dr in self.distractor_discs
+            ):
+                p.removeBody(b, physicsClientId=cid)
+                continue
+            pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=cid)
+            p.resetBasePositionAndOrientation(b, [pos[0], pos[1], pos[2] - lo[2]], orn, physicsClientId=cid)
+            for j in range(-1, p.getNumJoints(b, physicsClientId=cid)):
+                rgb = _hsv(rng.random(), rng.uniform(0.0, 0.9), rng.uniform(0.2, 0.95))
+                p.changeVisualShape(b, j, rgbaColor=[*rgb, 1.0], physicsClientId=cid)
+            self.distractor_bodies.append(b)
+            self.distractor_discs.append((cx, cy, r))
+
+    def free_for_camera(self, x: float, y: float) -> bool:
+        return self.sim.pose_free(x, y) and all(math.hypot(x - dx, y - dy) > dr + 0.15 for dx, dy, dr in self.distractor_discs)
+
+    def sample_light(self) -> dict[str, Any]:
+        rng = self.rng
+        az, el = rng.uniform(-math.pi, math.pi), rng.uniform(0.35, 1.45)
+        warm = rng.uniform(-0.12, 0.12)
+        return dict(
+            lightDirection=[math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)],
+            lightColor=[1.0 + warm, 1.0, 1.0 - warm],
+            lightAmbientCoeff=float(rng.uniform(0.35, 0.8)),
+            lightDiffuseCoeff=float(rng.uniform(0.2, 0.7)),
+            lightSpecularCoeff=float(rng.uniform(0.0, 0.3)),
+            shadow=int(rng.random() < 0.2),
+        )
+
+
+def sensor_effects(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Camera-like degradations: exposure/contrast/gamma, colour balance, blur or motion blur, noise."""
+    img = rgb.astype(np.float32) / 255.0
+    gain = rng.uniform(0.75, 1.25) * rng.uniform(0.93, 1.07, 3)
+    img = np.clip((img - 0.5) * rng.uniform(0.8, 1.2) + 0.5, 0, 1) * gain.astype(np.float32)
+    img = np.clip(img, 0, 1) ** rng.uniform(0.8, 1.25)
+    r = rng.random()
+    if r < 0.25:
+        img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.4, 1.2))
+    elif r < 0.35:
+        k = int(rng.integers(3, 8))
+        kernel = np.zeros((k, k), np.float32)
+        kernel[k // 2, :] = 1.0 / k
+        if rng.random() < 0.3:
+            kernel = kernel.T
+        img = cv2.filter2D(img, -1, kernel)
+    sigma = rng.uniform(0.5, 7.0) / 255.0
+    img = img + rng.normal(0.0, sigma, img.shape).astype(np.float32)
+    return np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+# ----------------------------------------------------------------------------------------------
+# Viewpoints
+# ----------------------------------------------------------------------------------------------
+
+
+def _line_of_sight(sim, xy: tuple[float, float], oid: int) -> bool:
+    """True if a ray from camera height at ``xy`` to the object's mid-height centre first meets the object."""
+    import pybullet as p
+
+    o = sim.world.objects[oid]
+    z0, z1 = o.z_range()
+    hit = p.rayTest([xy[0], xy[1], 0.2], [o.x, o.y, max(0.03, min((z0 + z1) / 2, 0.6))], physicsClientId=sim.client)[0]
+    return hit[0] < 0 or hit[0] in sim.object_body_ids.get(oid, ())
+
+
+def sample_viewpoint(sim, rz: Randomizer, rng: np.random.Generator, tries: int = 60):
+    """A free robot pose ``Pose2`` (looking at an object, along a route, or anywhere) or None."""
+    from app.ocslam.se2 import Pose2
+
+    world = sim.world
+    xmin, ymin, xmax, ymax = world.bounds()
+    routes = [np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in world.routes.values() if len(r) >= 2]
+    for _ in range(tries):
+        mode = rng.random()
+        if mode < 0.7 and world.objects:
+            oid = int(rng.integers(len(world.objects)))
+            o = world.objects[oid]
+            d = float(rng.uniform(0.45, 4.0) if rng.random() < 0.8 else rng.uniform(0.3, 0.8))
+            a = rng.uniform(-math.pi, math.pi)
+            x, y = o.x + d * math.cos(a), o.y + d * math.sin(a)
+            yaw = math.atan2(o.y - y, o.x - x) + rng.uniform(-0.5, 0.5)
+            if not _line_of_sight(sim, (x, y), oid):
+                continue
+        elif mode < 0.9 and routes:
+            r = routes[int(rng.integers(len(routes)))]
+            k = int(rng.integers(len(r) - 1))
+            t = rng.random()
+            x, y = r[k] + t * (r[k + 1] - r[k])
+            seg = r[k + 1] - r[k]
+            yaw = math.atan2(seg[1], seg[0]) + rng.normal(0.0, 0.5) + (math.pi if rng.random() < 0.2 else 0.0)
+        else:
+            x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
+            yaw = rng.uniform(-math.pi, math.pi)
+        if rz.free_for_camera(float(x), float(y)):
+            return Pose2(float(x), float(y), float(yaw))
+    return None
+
+
+# ----------------------------------------------------------------------------------------------
+# Rendering one world (runs in a worker process)
+# ----------------------------------------------------------------------------------------------
+
+_progress_queue = None
+
+
+def _init_worker(q) -> None:
+    global _progress_queue
+    _progress_queue = q
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int], None] | None = None) -> list[dict]:
+    """Render ``task.images`` views of one world into ``opts.out``; returns the image records."""
+    from app.config import Config, resolve_path
+    from app.sim_world import SimWorld
+    from app.worlds import load_world, random_world
+
+    if progress is None and _progress_queue is not None:
+        progress = _progress_queue.put
+    world = load_world(resolve_path(APARTMENT)) if task.kind == "apartment" else random_world(task.world_seed)
+    cfg = Config()
+    W, H = opts.imgsz
+    rng = np.random.default_rng([int(opts.seed), int(task.index), 0x5EED])
+    sim = SimWorld(world, cfg, seed=int(task.world_seed))
+    records: list[dict] = []
+    img_dir = Path(opts.out) / "images" / task.split
+    lbl_dir = Path(opts.out) / "labels" / task.split
+    img_dir.mkdir(parents=True, exist_ok=True)
+    lbl_dir.mkdir(parents=True, exist_ok=True)
+    class_of = {i: CLASS_INDEX[o.label] for i, o in enumerate(world.objects)}
+    base_z = float(sim.robot_model.T_base_camera_optical[2, 3])
+    world_name = "apartment" if task.kind == "apartment" else f"random_world({task.world_seed})"
+    silhouettes = SilhouetteRenderer(world, cfg.camera.near_m, cfg.camera.far_m)
+    with tempfile.TemporaryDirectory(prefix="ocslam-tex-") as tmp:
+        rz = Randomizer(sim, rng, Path(tmp), opts.distractors if opts.randomize else (0, 0))
+        try:
+            if opts.randomize:
+                rz.randomize_scene()
+            k = 0
+            attempts = 0
+            while k < task.images and attempts < task.images * 6:
+                attempts += 1
+                pose = sample_viewpoint(sim, rz, rng)
+                if pose is None:
+                    continue
+                cam_z = base_z + float(rng.uniform(-0.05, 0.07)) if opts.randomize else None
+                pitch = float(rng.uniform(-0.08, 0.12)) if opts.randomize else 0.0
+                light = rz.sample_light() if opts.randomize else None
+                frame = sim.render_view(pose, width=W, height=H, camera_z=cam_z, pitch_rad=pitch, light=light, segmentation=True)
+                vis = visible_boxes(frame.segmentation)
+                min_px = opts.label_filter.scaled(W)[0]
+                cands = [i for i, v in vis.items() if i in class_of and v[4] >= min_px]
+                full = silhouettes.counts(frame.T_world_camera, frame.info.K, W, H, cands)
+                labels = make_labels(frame.segmentation, class_of, full, opts.label_filter)
+                if not any(lb.keep for lb in labels) and rng.random() > opts.empty_keep_prob:
+                    continue
+                rgb = sensor_effects(frame.image.data, rng) if opts.randomize else frame.image.data
+                stem = f"w{task.index:03d}_{k:04d}"
+                cv2.imwrite(str(img_dir / f"{stem}.png"), rgb[:, :, ::-1])
+                lines = yolo_lines(labels, W, H)
+                (lbl_dir / f"{stem}.txt").write_text("\n".join(lines) + ("\n" if lines else ""))
+                records.append(
+                    {
+                        "file_name": f"images/{task.split}/{stem}.png",
+                        "width": W,
+                        "height": H,
+                        "split": task.split,
+                        "world": world_name,
+                        "pose": [round(pose.x, 3), round(pose.y, 3), round(pose.yaw, 4)],
+                        "labels": [
+                            {
+                                "class_id": lb.class_id,
+                                "bbox": [lb.x1, lb.y1, lb.x2, lb.y2],
+                                "keep": lb.keep,
+                                "visible_pixels": lb.visible_pixels,
+                                "visible_fraction": round(lb.visible_fraction, 4),
+                                "object": world.object_name(lb.object_id),
+                            }
+                            for lb in labels
+                        ],
+                    }
+                )
+                k += 1
+                if progress is not None:
+                    progress(1)
+                if opts.randomize and k % max(1, opts.rerandomize_every) == 0 and k < task.images:
+                    rz.randomize_scene()
+        finally:
+            sim.close()
+            silhouettes.close()
+    return records
+
+
+# ----------------------------------------------------------------------------------------------
+# The whole dataset
+# ----------------------------------------------------------------------------------------------
+
+
+def _coco(records: list[dict]) -> dict[str, Any]:
+    images, anns = [], []
+    for i, r in enumerate(records):
+        images.append({k: r[k] for k in ("file_name", "width", "height", "world", "pose")} | {"id": i + 1})
+        for lb in r["labels"]:
+            x1, y1, x2, y2 = lb["bbox"]
+            anns.append(
+                {
+                    "id": len(anns) + 1,
+                    "image_id": i + 1,
+                    "category_id": lb["class_id"] + 1,
+                    "bbox": [x1, y1, x2 - x1, y2 - y1],
+                    "area": (x2 - x1) * (y2 - y1),
+                    "iscrowd": 0 if lb["keep"] else 1,
+                    "visible_fraction": lb["visible_fraction"],
+                    "visible_pixels": lb["visible_pixels"],
+                    "object": lb["object"],
+                }
+            )
+    cats = [{"id": i + 1, "name": n} for i, n in enumerate(CLASS_NAMES)]
+    return {"images": images, "annotations": anns, "categories": cats}
+
+
+def build_dataset(opts: DatasetOptions, progress: bool = True) -> dict[str, Any]:
+    """Render every world (in ``opts.workers`` processes) and write the YOLO dataset. Returns a summary."""
+    from tqdm import tqdm
+
+    out = Path(opts.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = plan_worlds(opts)
+    total = sum(t.images for t in tasks)
+    t0 = time.monotonic()
+    records: list[dict] = []
+    bar = tqdm(total=total, desc="rendering", unit="img", disable=not progress, file=sys.stderr, smoothing=0.05)
+    try:
+        if opts.workers <= 1 or len(tasks) == 1:
+            for t in tasks:
+                records += render_world(t, opts, progress=bar.update)
+        else:
+            ctx = mp.get_context("fork")
+            q = ctx.Queue()
+            with ctx.Pool(min(opts.workers, len(tasks)), initializer=_init_worker, initargs=(q,)) as pool:
+                # biggest worlds first, so the last process is not left alone with a long one
+                order = sorted(tasks, key=lambda t: -t.images)
+                pending = [pool.apply_async(render_world, (t, opts)) for t in order]
+                while pending:
+                    try:
+                        while True:
+                            bar.update(q.get(timeout=0.2))
+                    except queue_mod.Empty:
+                        pass
+                    done = [a for a in pending if a.ready()]
+                    for a in done:
+                        records += a.get()
+                        pending.remove(a)
+                while True:
+                    try:
+                        bar.update(q.get_nowait())
+                    except queue_mod.Empty:
+                        break
+    finally:
+        bar.close()
+    records.sort(key=lambda r: r["file_name"])
+    by_split = {s: [r for r in records if r["split"] == s] for s in ("train", "val")}
+    for s, recs in by_split.items():
+        (out / "images" / s).mkdir(parents=True, exist_ok=True)
+        (out / "labels" / s).mkdir(parents=True, exist_ok=True)
+        (out / f"annotations_{s}.json").write_text(json.dumps(_coco(recs)))
+    counts = {s: {n: 0 for n in CLASS_NAMES} for s in by_split}
+    for s, recs in by_split.items():
+        for r in recs:
+            for lb in r["labels"]:
+                if lb["keep"]:
+                    counts[s][CLASS_NAMES[lb["class_id"]]] += 1
+    worlds = {s: sorted({r["world"] for r in recs}) for s, recs in by_split.items()}
+    meta = {
+        "command": opts.command,
+        "seed": int(opts.seed),
+        "worlds": int(opts.worlds),
+        "per_world": int(opts.per_world),
+        "imgsz": list(opts.imgsz),
+        "images": {s: len(r) for s, r in by_split.items()},
+        "boxes": {s: sum(c.values()) for s, c in counts.items()},
+        "train_worlds": worlds["train"],
+        "val_worlds": worlds["val"],
+        "label_filter": asdict(opts.label_filter),
+        "randomize": opts.randomize,
+        "render_s": round(time.monotonic() - t0, 1),
+    }
+    data = {
+        "train": "images/train",
+        "val": "images/val",
+        "nc": len(CLASS_NAMES),
+        "names": {i: n for i, n in enumerate(CLASS_NAMES)},
+        "ocslam": meta,
+    }
+    (out / "data.yaml").write_text(
+        "# YOLO dataset rendered and labelled by `ocslam dataset` (see docs/detector.md)\n" + yaml.safe_dump(data, sort_keys=False)
+    )
+    meta["class_counts"] = counts
+    return meta
+
+
+def load_samples(data_dir: str | Path, split: str = "val"):
+    """Evaluation samples (``app.bench.detector.Sample``) of a dataset split (``train``, ``val`` or ``all``),
+    with not-kept visible objects as ignore boxes."""
+    from app.bench.detector import GtBox, Sample
+
+    data_dir = Path(data_dir)
+    splits = ("train", "val") if split == "all" else (split,)
+    out = []
+    for s in splits:
+        f = data_dir / f"annotations_{s}.json"
+        if not f.exists():
+            raise FileNotFoundError(f"{f} not found: make the dataset with `ocslam dataset --out {data_dir}`")
+        d = json.loads(f.read_text())
+        by_img: dict[int, list] = {}
+        for a in d["annotations"]:
+            x, y, w, h = a["bbox"]
+            by_img.setdefault(a["image_id"], []).append(GtBox(a["category_id"] - 1, x, y, x + w, y + h, bool(a["iscrowd"])))
+        for im in d["images"]:
+            out.append(Sample(data_dir / im["file_name"], im["width"], im["height"], tuple(by_img.get(im["id"], ()))))
+    return out
+
+
+def command_line(argv: Sequence[str] | None = None) -> str:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    return "ocslam " + " ".join(shlex.quote(a) for a in argv)

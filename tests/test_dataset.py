@@ -1,0 +1,86 @@
+"""The rendered YOLO dataset: split by world, YOLO files consistent with the COCO annotations."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from app.dataset import DatasetOptions, build_dataset, load_samples, make_texture, parse_imgsz, plan_worlds, sensor_effects
+from app.labels import LabelFilter
+from app.ocslam.messages import CLASS_NAMES
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10_000), st.integers(0, 60), st.floats(0.0, 1.0), st.booleans())
+def test_plan_splits_by_world(seed: int, n: int, frac: float, apartment: bool) -> None:
+    tasks = plan_worlds(DatasetOptions(out=Path("x"), worlds=n, seed=seed, val_fraction=frac, apartment=apartment))
+    keys = [(t.kind, t.world_seed) for t in tasks]
+    assert len(set(keys)) == len(keys)  # every world once, so in exactly one split
+    assert {t.split for t in tasks} <= {"train", "val"}
+    assert all(t.split == "train" for t in tasks if t.kind == "apartment")
+    n_val = sum(t.split == "val" for t in tasks)
+    if 0 < frac < 1 and n >= 2:
+        assert 1 <= n_val <= n - 1  # both splits exist
+    # Datasets with other seeds never share a random world.
+    other = plan_worlds(DatasetOptions(out=Path("x"), worlds=n, seed=seed + 1))
+    assert not {t.world_seed for t in tasks if t.kind == "random"} & {t.world_seed for t in other if t.kind == "random"}
+
+
+def test_parse_imgsz() -> None:
+    assert parse_imgsz("320x240") == (320, 240)
+    assert parse_imgsz("640×480") == (640, 480)
+    with pytest.raises(ValueError):
+        parse_imgsz("320")
+
+
+def test_textures_and_sensor_effects_are_images() -> None:
+    rng = np.random.default_rng(0)
+    for kind in ("planks", "tiles", "checker", "carpet", "stripes", "marble", "plain"):
+        t = make_texture(kind, rng, 64)
+        assert t.shape == (64, 64, 3) and t.dtype == np.uint8
+    img = np.full((24, 32, 3), 128, np.uint8)
+    out = sensor_effects(img, rng)
+    assert out.shape == img.shape and out.dtype == np.uint8 and not np.array_equal(out, img)
+
+
+@pytest.mark.slow
+def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    meta = build_dataset(
+        DatasetOptions(
+            out=out, worlds=3, per_world=3, seed=5, imgsz=(160, 120), workers=1, val_fraction=0.34,
+            apartment=True, apartment_images=2, label_filter=LabelFilter(), command="test",
+        ),
+        progress=False,
+    )
+    assert meta["images"] == {"train": 8, "val": 3}
+    assert not set(meta["train_worlds"]) & set(meta["val_worlds"])
+    assert "apartment" in meta["train_worlds"] and len(meta["val_worlds"]) == 1
+    data = yaml.safe_load((out / "data.yaml").read_text())
+    assert [data["names"][i] for i in range(len(CLASS_NAMES))] == list(CLASS_NAMES)
+    assert data["ocslam"]["command"] == "test" and data["ocslam"]["seed"] == 5
+    for split in ("train", "val"):
+        coco = json.loads((out / f"annotations_{split}.json").read_text())
+        worlds = {im["world"] for im in coco["images"]}
+        assert worlds == set(meta[f"{split}_worlds"])
+        kept: dict[int, int] = {}
+        for a in coco["annotations"]:
+            kept[a["image_id"]] = kept.get(a["image_id"], 0) + (a["iscrowd"] == 0)
+            assert a["iscrowd"] == 1 or a["visible_fraction"] >= 0.35
+        for im in coco["images"]:
+            img = out / im["file_name"]
+            assert img.exists()
+            lbl = out / "labels" / split / (img.stem + ".txt")
+            rows = [r.split() for r in lbl.read_text().splitlines() if r.strip()]
+            assert len(rows) == kept.get(im["id"], 0)
+            for r in rows:
+                assert 0 <= int(r[0]) < len(CLASS_NAMES)
+                assert all(0.0 <= float(v) <= 1.0 for v in r[1:])
+    samples = load_samples(out, "all")
+    assert len(samples) == 11 and samples[0].load().shape == (120, 160, 3)

@@ -955,14 +955,20 @@ def _try_random_world(rng: np.random.Generator, seed: int, n_rooms: int | None, 
         interior_segments.setdefault(e, []).append(Opening(s0, s0 + width, 0.0, 2.1, "passage"))
         mid = lo + s0 + width / 2
         doorway_points.append((c, mid) if kind == "v" else (mid, c))
+    interior_doors: list[tuple[tuple, float]] = []  # (edge, s_mid): closed doors between rooms
     for i, j, e in edges:
+        if e not in interior_segments and rng.random() < 0.5:
+            # no doorway here: a closed door (like a closet's), seen from both rooms
+            s0 = float(rng.uniform(0.35, (e[3] - e[2]) - 1.0 - 0.35))
+            interior_segments[e] = [Opening(s0, s0 + 1.0, 0.0, 2.1, "door")]
+            interior_doors.append((e, s0 + 0.5))
         interior_segments.setdefault(e, [])
     for e, ops in interior_segments.items():
         kind, c, lo, hi = e
         a, b = ((c, lo), (c, hi)) if kind == "v" else ((lo, c), (hi, c))
         walls.append(Wall(a, b, t_in, height, tuple(sorted(ops, key=lambda o: o.start)), name="partition"))
-    # interior walls between rooms that share an edge shorter than 1.4 m are not generated: merge
-    # tiny leftovers by making sure every room boundary exists
+    # boundaries between rooms that share too short an edge get plain walls: make sure every room
+    # boundary exists
     covered = unary_union([w.polygon() for w in walls])
     for r in rooms:
         for a, b in (((r.x0, r.y0), (r.x1, r.y0)), ((r.x1, r.y0), (r.x1, r.y1)), ((r.x1, r.y1), (r.x0, r.y1)), ((r.x0, r.y1), (r.x0, r.y0))):
@@ -995,6 +1001,13 @@ def _try_random_world(rng: np.random.Generator, seed: int, n_rooms: int | None, 
         yaw = wall.yaw + math.pi / 2
         color = _pick_color(rng, "door")
         objects.append(WorldObject("door", "door", px, py, yaw, 1.0, color))
+        keepout.append(Point(px, py).buffer(0.6))
+
+    for e, s_mid in interior_doors:
+        kind, c, lo, hi = e
+        px, py = (c, lo + s_mid) if kind == "v" else (lo + s_mid, c)
+        yaw = 0.0 if kind == "v" else math.pi / 2  # the door's x axis crosses the wall
+        objects.append(WorldObject("door", "door", px, py, yaw, 1.0, _pick_color(rng, "door")))
         keepout.append(Point(px, py).buffer(0.6))
 
     def fits(fp: Polygon, gap: float) -> bool:
@@ -1042,7 +1055,7 @@ def _try_random_world(rng: np.random.Generator, seed: int, n_rooms: int | None, 
                    "person": False, "gnome": True, "ball": False, "duck": False}
     for label in CLASS_NAMES:
         if label == "door":
-            if not door_slots:
+            if not door_slots and not interior_doors:
                 return None  # every world must show a door
             continue
         choices = models_for_class(label)

@@ -268,3 +268,22 @@ def test_pose3_matches_pose2():
     M = pose3(T, 0.3)
     q = M @ np.array([0.5, 0.25, 0.0, 1.0])
     assert np.allclose(q[:2], T.transform_points(np.array([[0.5, 0.25]]))[0]) and q[2] == pytest.approx(0.3)
+
+
+def test_pybullet_robot_links_agree_with_the_robot_model():
+    import pybullet as p
+
+    sim = SimWorld(box_room(), quiet_config(), seed=0)
+    try:
+        sim.set_robot_pose(Pose2(1.2, -0.4, 0.7))
+        sim.render_camera(32, 24)  # syncs the robot's visual pose
+        cid, body = sim.client, sim.robot_body
+        index = {p.getJointInfo(body, j, physicsClientId=cid)[12].decode(): j for j in range(p.getNumJoints(body, physicsClientId=cid))}
+        for link, T in (("base_scan", sim.robot_model.T_base_scan), ("camera_optical_frame", sim.robot_model.T_base_camera_optical)):
+            pos = p.getLinkState(body, index[link], physicsClientId=cid)[4]
+            assert np.allclose(pos, (sim.T_world_base3() @ T)[:3, 3], atol=1e-6), link
+        # the robot itself is invisible to the LIDAR
+        scan = sim.scan()
+        assert np.all(scan.ranges[np.isfinite(scan.ranges)] > 0.5)
+    finally:
+        sim.close()

@@ -287,3 +287,22 @@ def test_pybullet_robot_links_agree_with_the_robot_model():
         assert np.all(scan.ranges[np.isfinite(scan.ranges)] > 0.5)
     finally:
         sim.close()
+
+
+def test_arc_is_integrated_exactly():
+    cfg = quiet_config(**{"sim.motor_time_constant_s": 0.0})
+    sim = SimWorld(box_room(half=4.0), cfg, seed=0)
+    try:
+        sim.set_cmd_vel(Twist(0.1, 0.5))
+        sim.step(200)  # 2 s: θ = 1 rad on a circle of radius v/ω = 0.2 m
+        p = sim.true_pose()
+        assert p.yaw == pytest.approx(1.0, abs=1e-9)
+        assert p.x == pytest.approx(0.2 * math.sin(1.0), abs=1e-9)
+        assert p.y == pytest.approx(0.2 * (1 - math.cos(1.0)), abs=1e-9)
+        # encoders measure exactly the commanded wheel rotation (no slip, no noise)
+        e = sim.read_encoders()
+        r, sep = sim.robot_model.wheel_radius_m, sim.robot_model.wheel_separation_m
+        assert e.left_rad == pytest.approx((0.1 - 0.5 * sep / 2) / r * 2.0, rel=1e-9)
+        assert e.right_rad == pytest.approx((0.1 + 0.5 * sep / 2) / r * 2.0, rel=1e-9)
+    finally:
+        sim.close()

@@ -198,3 +198,40 @@ def test_documented_example_and_bundled_worlds_are_valid():
     assert {o.label for o in w.objects} == {"dog", "chair", "door", "ball"}
     for f in sorted(Path("assets/worlds").glob("*.yaml")):
         load_world(f)
+
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    length=st.floats(1.0, 12.0),
+    height=st.floats(1.0, 3.0),
+    cuts=st.lists(st.tuples(st.floats(0.0, 1.0), st.floats(0.05, 0.3), st.floats(0.0, 0.8), st.floats(0.1, 1.0)), max_size=4),
+)
+def test_wall_pieces_and_openings_tile_the_wall(length, height, cuts):
+    """Solid pieces plus openings cover the wall's face exactly once (area L·H), for any openings."""
+    from app.worlds import Opening, Wall
+
+    openings, s = [], 0.0
+    for frac, width, bottom, top in cuts:
+        s0 = s + frac * 0.3 * length
+        s1 = s0 + width * length
+        if s1 > length:
+            break
+        z0 = bottom * height * 0.5
+        z1 = z0 + (height - z0) * top
+        if z1 - z0 < 1e-3:
+            continue
+        openings.append(Opening(s0, s1, z0, z1, "window"))
+        s = s1
+    w = Wall((0.0, 0.0), (length, 0.0), 0.2, height, tuple(openings))
+    pieces = w.boxes()
+    area = sum((s1 - s0) * (z1 - z0) for s0, s1, z0, z1, _, _ in pieces)
+    holes = sum((o.end - o.start) * (o.top - o.bottom) for o in openings)
+    assert area + holes == pytest.approx(length * height, rel=1e-9)
+    for s0, s1, z0, z1, th, yaw in pieces:
+        assert 0 <= s0 < s1 <= length + 1e-9 and 0 <= z0 < z1 <= height + 1e-9
+        for o in openings:  # no piece intrudes into an opening
+            assert min(s1, o.end) - max(s0, o.start) <= 1e-9 or min(z1, o.top) - max(z0, o.bottom) <= 1e-9

@@ -49,7 +49,7 @@ def test_only_the_duck_is_always_below_the_lidar_plane():
 
 
 def test_legged_classes():
-    assert {n for n, p in CLASS_PRIORS.items() if p.legged} == {"dog", "table", "person"}
+    assert {n for n, p in CLASS_PRIORS.items() if p.legged} == {"dog", "table", "person", "chair"}
 
 
 def test_derived_extents_and_fit():

@@ -11,7 +11,10 @@ scale objects by up to ±20 % and vary the models. Each size is ``(min, nominal,
 - ``width``: the shorter horizontal side,
 - ``height``: the top above the floor.
 
-``legged``: the LIDAR plane cuts the object in several separate legs (table, dog, person).
+``shapes``: typical ``(long, short)`` footprints of real instances (a chair may be a dining chair, an
+armchair or a sofa); a visible face matched against them gives the unseen depth.
+``legged``: the LIDAR plane may cut the object in several separate legs (table, dog, person, dining
+chair); ``leg_span``: the largest ``(long, short)`` extent of the legs of one instance.
 ``solid_fraction``: the central fraction of the box's width in which the object blocks the LIDAR
 beams (a door blocks all of it, a potted plant only its pot): used by the see-through check.
 ``on_wall``: the object sits in a wall (doors), so its island legitimately continues into the wall.
@@ -39,6 +42,8 @@ class ClassPrior:
     on_wall: bool = False
     #: Largest horizontal extent of one leg island (m); islands larger than this are never legs.
     leg_size_max: float = 0.35
+    shapes: tuple[tuple[float, float], ...] = ()
+    leg_span: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         for key in ("length", "width", "height"):
@@ -47,6 +52,17 @@ class ClassPrior:
                 raise ValueError(f"class prior {self.name}.{key}: need 0 < min <= nominal <= max, got {(lo, nom, hi)}")
         if self.width[2] > self.length[2] or self.width[1] > self.length[1]:
             raise ValueError(f"class prior {self.name}: width is the shorter side")
+        if not self.shapes:
+            object.__setattr__(self, "shapes", ((self.length[1], self.width[1]),))
+        if self.legged and self.leg_span is None:
+            object.__setattr__(self, "leg_span", (self.length[2], self.width[2]))
+
+    def legs_fit(self, extent_a: float, extent_b: float, tolerance: float = 0.1) -> bool:
+        """True if a group of leg islands with these extents fits the legs of one instance."""
+        if self.leg_span is None:
+            return False
+        big, small = max(extent_a, extent_b), min(extent_a, extent_b)
+        return big <= self.leg_span[0] * (1.0 + tolerance) and small <= self.leg_span[1] * (1.0 + tolerance)
 
     # -- derived extents ---------------------------------------------------------------------------
     @property
@@ -77,29 +93,41 @@ class ClassPrior:
         return big <= self.length[2] * (1.0 + tolerance) and small <= self.width[2] * (1.0 + tolerance) + 0.05
 
 
-#: Priors in ``CLASS_NAMES`` order. Nominal values: the apartment's instances (spec §5).
+#: Priors in ``CLASS_NAMES`` order. Nominal values: the apartment's instances (spec §5); typical
+#: shapes: common real instances of the class (dining table / round table; dining chair / armchair /
+#: two- and three-seat sofa; tall / low bookcase).
 CLASS_PRIORS: dict[str, ClassPrior] = {
     p.name: p
     for p in (
         ClassPrior("ball", (0.14, 0.225, 0.32), (0.14, 0.225, 0.32), (0.14, 0.225, 0.34), solid_fraction=0.5),
         ClassPrior(
-            "dog", (0.45, 0.95, 1.3), (0.15, 0.3, 0.55), (0.35, 0.7, 1.0), legged=True, leg_size_max=0.3
+            "dog", (0.45, 1.0, 1.4), (0.15, 0.27, 0.55), (0.35, 0.74, 1.0),
+            legged=True, leg_size_max=0.35, leg_span=(0.8, 0.45),
         ),
-        ClassPrior("gnome", (0.14, 0.27, 0.45), (0.12, 0.21, 0.4), (0.3, 0.9, 1.2), solid_fraction=0.3),
+        ClassPrior("gnome", (0.14, 0.3, 0.45), (0.12, 0.25, 0.4), (0.3, 0.94, 1.2), solid_fraction=0.3),
         ClassPrior(
-            "table", (0.7, 1.8, 2.3), (0.45, 1.0, 1.35), (0.45, 0.74, 1.0), legged=True, leg_size_max=0.3
+            "table", (0.7, 1.8, 2.3), (0.45, 1.0, 1.35), (0.45, 0.74, 1.0),
+            legged=True, leg_size_max=0.3, shapes=((1.8, 1.0), (1.0, 1.0)), leg_span=(2.3, 1.35),
         ),
-        ClassPrior("chair", (0.45, 1.4, 2.3), (0.4, 1.0, 1.3), (0.45, 0.8, 1.3), solid_fraction=0.4),
         ClassPrior(
-            "door", (0.6, 1.0, 1.3), (0.02, 0.1, 0.4), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True
+            "chair", (0.35, 1.1, 2.7), (0.3, 1.0, 1.3), (0.45, 0.8, 1.3), solid_fraction=0.4,
+            legged=True, leg_size_max=0.15, shapes=((1.1, 1.0), (0.44, 0.44), (1.8, 1.0), (2.2, 1.0)), leg_span=(0.6, 0.6),
         ),
-        ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.08, 0.16), (0.05, 0.1, 0.16)),
         ClassPrior(
-            "person", (0.25, 0.5, 0.8), (0.15, 0.3, 0.55), (1.2, 1.75, 2.3), legged=True, leg_size_max=0.3
+            "door", (0.6, 1.0, 1.3), (0.02, 0.3, 0.45), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True,
+            shapes=((1.0, 0.3),),
         ),
-        ClassPrior("extinguisher", (0.1, 0.2, 0.4), (0.08, 0.18, 0.35), (0.3, 0.7, 1.0), solid_fraction=0.3),
-        ClassPrior("flowers", (0.12, 0.3, 0.7), (0.12, 0.3, 0.7), (0.35, 0.95, 1.4), solid_fraction=0.1),
-        ClassPrior("shelf", (0.6, 1.0, 1.4), (0.25, 0.4, 0.7), (0.9, 2.2, 2.9), solid_fraction=0.5),
+        ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.075, 0.16), (0.05, 0.1, 0.16)),
+        ClassPrior(
+            "person", (0.25, 0.6, 0.85), (0.15, 0.3, 0.55), (1.2, 1.8, 2.3),
+            legged=True, leg_size_max=0.3, leg_span=(0.6, 0.4),
+        ),
+        ClassPrior("extinguisher", (0.1, 0.23, 0.4), (0.08, 0.18, 0.35), (0.3, 0.77, 1.0), solid_fraction=0.3),
+        ClassPrior("flowers", (0.12, 0.25, 0.7), (0.12, 0.19, 0.7), (0.35, 0.99, 1.4), solid_fraction=0.1),
+        ClassPrior(
+            "shelf", (0.6, 1.0, 1.5), (0.25, 0.4, 0.7), (0.9, 2.3, 2.9), solid_fraction=0.5,
+            shapes=((1.0, 0.4), (1.2, 0.35)),
+        ),
     )
 }
 

@@ -86,6 +86,7 @@ class Candidate:
     ray_weight: float = 0.0
     ground_center: FloatArray | None = None
     apparent_width: float = float("nan")  # the box's width at the island's range (m), NaN if cut by the border
+    support: bool | None = None  # legged classes: one small island on the centre line (a pedestal)
     track_id: int | None = None
     status: str = "new"  # new | created | updated | collision
 
@@ -580,7 +581,8 @@ class Consciousness:
                         reason = "size_far"
                     elif not (area.truncated["top"] or area.truncated["bottom"]) and app_h > pc.height[2] * k_size + 0.1:
                         reason = "size_far"
-                if reason is None and pc.solid_fraction > 0.0:
+                leg_like = pc.legged and isl.extent <= pc.leg_size_max
+                if reason is None and pc.solid_fraction > 0.0 and not leg_like:
                     if self._see_through(area, pc, r_front, beam_b, beam_r) or self._grid_free(area, pc, r_front, T_map_scan, grid):
                         reason = "corner_free_space"
             if reason is not None:
@@ -616,6 +618,17 @@ class Consciousness:
             if ray_w == 0.0:
                 # viewpoint only; the per-frame estimate still needs a direction hint
                 ev.ray_weight[-1] = 0.2
+            support = None
+            if pc.legged:
+                off = area.angular_offsets(islands[best].centroid[None, :])[0]
+                support = (
+                    len(group) == 1
+                    and islands[best].extent <= pc.leg_size_max
+                    and abs(off) < 0.25 * half
+                    and np.isfinite(app)
+                    and app > 3.0 * max(islands[best].extent, 0.05)
+                )
+                ev.support_obs, ev.corner_obs = (1, 0) if support else (0, 1)
             fp = estimate_footprint(ev, pc)
             return (
                 Candidate(
@@ -631,6 +644,7 @@ class Consciousness:
                     ray_dir=ray_d,
                     ray_weight=ray_w,
                     apparent_width=app,
+                    support=support,
                 ),
                 islands,
             )
@@ -709,7 +723,7 @@ class Consciousness:
             trial = np.vstack([pts, islands[i].points])
             _th, lo, hi = min_area_rect(trial)
             d = hi - lo
-            if pc.fits(float(d[0]), float(d[1]), tolerance=0.1):
+            if pc.legs_fit(float(d[0]), float(d[1])):
                 group.append(i)
                 pts = trial
         return group
@@ -820,6 +834,10 @@ class Consciousness:
         w = float(self.cfg.rolling_average_weight)
         if len(cand.points):
             ev.add_points(cand.points, kf)
+            if cand.support is True:
+                ev.support_obs += 1
+            elif cand.support is False:
+                ev.corner_obs += 1
         if cand.ground_center is not None:
             ev.add_ground_center(cand.ground_center, w, kf)
         if cand.ray_origin is not None and cand.ray_dir is not None:

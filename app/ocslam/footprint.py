@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 from shapely.geometry import MultiPoint, Polygon
@@ -79,9 +81,12 @@ class Footprint:
 
 
 def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
-    """Minimum-area enclosing rectangle of ``(N, 2)`` points (rotating calipers over the hull edges).
+    """Enclosing rectangle of ``(N, 2)`` points aligned with their dominant edge direction.
 
-    Returns ``(theta, lo (2,), hi (2,))``: the rectangle's first axis angle and the points' extents along
+    The orientation is the convex-hull edge direction (modulo 90°) backed by the greatest total edge
+    length within ±5°, so the two sides of an L (three legs of a table, two faces of a sofa) win over
+    the diagonal that a pure minimum-area rectangle may pick; ties go to the smaller area.
+    Returns ``(theta, lo (2,), hi (2,))``: the first axis angle and the points' extents along
     ``e1 = (cos θ, sin θ)`` and ``e2 = (−sin θ, cos θ)``.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -90,21 +95,25 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
         ring = np.asarray(hull.exterior.coords)
         edges = np.diff(ring, axis=0)
         thetas = np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2)
+        lengths = np.hypot(edges[:, 0], edges[:, 1])
         hp = ring[:-1]
     elif hull.geom_type == "LineString":
         ring = np.asarray(hull.coords)
         d = ring[-1] - ring[0]
-        thetas = np.array([np.arctan2(d[1], d[0])])
+        thetas = np.array([np.arctan2(d[1], d[0]) % (np.pi / 2)])
+        lengths = np.array([1.0])
         hp = ring
     else:
-        thetas = np.array([0.0])
-        hp = p[:1]
-    thetas = np.unique(np.round(thetas, 9))
+        thetas, lengths, hp = np.array([0.0]), np.array([1.0]), p[:1]
+    diff = np.abs(thetas[:, None] - thetas[None, :])
+    diff = np.minimum(diff, np.pi / 2 - diff)
+    support = (diff <= np.deg2rad(5.0)).astype(np.float64) @ lengths
     c, s = np.cos(thetas), np.sin(thetas)
     a = hp[None, :, 0] * c[:, None] + hp[None, :, 1] * s[:, None]
     b = -hp[None, :, 0] * s[:, None] + hp[None, :, 1] * c[:, None]
     areas = (a.max(1) - a.min(1)) * (b.max(1) - b.min(1))
-    k = int(np.argmin(areas))
+    best = np.flatnonzero(support >= support.max() - 1e-9)
+    k = int(best[np.argmin(areas[best])])
     th = float(thetas[k])
     c, s = np.cos(th), np.sin(th)
     a = p[:, 0] * c + p[:, 1] * s
@@ -153,6 +162,9 @@ class ObjectEvidence:
         self.ray_app = np.zeros(0)  # apparent width seen along each ray (m), NaN if unknown
         self.gp_center: FloatArray | None = None
         self.gp_kf: int = NO_KEYFRAME
+        #: legged classes: observations as one small island on the box's centre line vs. off it / several legs
+        self.support_obs = 0
+        self.corner_obs = 0
 
     # -- accumulation ----------------------------------------------------------------------------
     @property
@@ -239,6 +251,8 @@ class ObjectEvidence:
                 self.add_points(np.repeat(other.points[m], other.hits[m], axis=0), int(k))
         for o, d, w, k, a in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app):
             self.add_ray(o, d, float(w), int(k), apparent_width=float(a))
+        self.support_obs += other.support_obs
+        self.corner_obs += other.corner_obs
         if other.gp_center is not None:
             if self.gp_center is None:
                 self.gp_center, self.gp_kf = other.gp_center.copy(), other.gp_kf
@@ -281,6 +295,8 @@ class ObjectEvidence:
             "ray_app": [None if not np.isfinite(a) else float(a) for a in self.ray_app],
             "gp_center": None if self.gp_center is None else self.gp_center.tolist(),
             "gp_kf": self.gp_kf,
+            "support_obs": self.support_obs,
+            "corner_obs": self.corner_obs,
         }
 
     @staticmethod
@@ -302,6 +318,8 @@ class ObjectEvidence:
         gp = d.get("gp_center")
         e.gp_center = None if gp is None else np.asarray(gp, dtype=np.float64).reshape(2)
         e.gp_kf = int(d.get("gp_kf", NO_KEYFRAME))
+        e.support_obs = int(d.get("support_obs", 0))
+        e.corner_obs = int(d.get("corner_obs", 0))
         if not (len(e.points) == len(e.hits) == len(e.point_kf)) or not (
             len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app)
         ):
@@ -324,8 +342,43 @@ def _one_sided(viewpoints: FloatArray, center: FloatArray, axis: FloatArray, hal
     return 0
 
 
+def depth_for_width(width: float, pc: ClassPrior) -> tuple[float, float, float]:
+    """``(nominal, min, max)`` depth of an object of class ``pc`` whose visible face is ``width`` wide.
+
+    Matches the face against the sides of the class's typical footprints (each within ±30 % scale);
+    without a match, the class's width range (a face wider than any width is a length).
+    """
+    best: tuple[float, float] | None = None
+    for a, b in pc.shapes:
+        for face, other in ((a, b), (b, a)):
+            sc = width / face
+            if 0.7 <= sc <= 1.3:
+                score = abs(math.log(sc))
+                if best is None or score < best[0] - 1e-9:
+                    best = (score, other * sc)
+    if best is not None:
+        d = best[1]
+        return d, 0.8 * d, 1.25 * d
+    if width > pc.width[2]:
+        return pc.width[1], pc.width[0], pc.width[2]
+    return pc.width[1], pc.width[0], pc.length[2]
+
+
 def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: float = 1.0) -> Footprint | None:
-    """The object's footprint from its evidence and class prior (object frame). ``None`` if no evidence."""
+    """The object's footprint from its evidence and class prior (object frame). ``None`` if no evidence.
+
+    1. The minimum-area rectangle of the points gives the orientation and the observed extents.
+    2. The *depth* axis is the one most aligned with the viewing directions, the other is *tangential*.
+       The box's apparent width measures the tangential extent; a tangential extent smaller than it
+       means part of the object was hidden or is not at the LIDAR height (legs).
+    3. Seen from one side only, the object extends away from the robot by the depth of the typical
+       footprint whose face matches its width (:func:`depth_for_width`).
+    4. The centre is the least-squares crossing of the bisector rays, constrained to the interval the
+       points and sizes allow on each axis.
+
+    A legged object seen as one small support on the box's centre line (a pedestal table) keeps its
+    centre on that support.
+    """
     L, W = pc.length, pc.width
     if not ev.has_points:
         if ev.gp_center is None:
@@ -334,7 +387,8 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
         if len(ev.ray_dir):
             d = ev.ray_dir[-1]
             yaw = float(np.arctan2(d[1], d[0]) + np.pi / 2)
-        return Footprint(ev.gp_center.copy(), yaw, L[1], W[1])
+        a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
+        return Footprint(ev.gp_center.copy(), yaw, a, b)
 
     th, lo, hi = min_area_rect(ev.points)
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
@@ -343,68 +397,76 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
     center0 = axes.T @ mid
     views = ev.ray_origin
     side = [_one_sided(views, center0, axes[i], d_obs[i] / 2) for i in range(2)]
-    # the depth axis is the one most aligned with the viewing directions; the other is tangential
     depth_axis = -1
     if len(views):
         u = center0[None, :] - views
         u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
         depth_axis = int(np.argmax(np.abs(u @ axes.T).mean(axis=0)))
-
-    # the box's apparent width, seen along the depth axis, measures the tangential extent
     tan_axis = 1 - depth_axis if depth_axis >= 0 else -1
+
     w_app = float("nan")
     if tan_axis >= 0 and len(ev.ray_app):
         along = np.abs(ev.ray_dir @ axes[depth_axis]) > 0.85
         vals = ev.ray_app[along & np.isfinite(ev.ray_app)]
         if len(vals):
             w_app = float(np.median(vals))
-    tan_complete = tan_axis >= 0 and np.isfinite(w_app) and d_obs[tan_axis] >= 0.75 * w_app
 
-    # which rectangle axis is the object's length, which its width
-    a = int(np.argmax(d_obs))
-    dims: list[tuple[float, float, float]] = [W, W]
-    dims[a], dims[1 - a] = L, W
-    if tan_axis >= 0 and side[depth_axis] != 0 and np.isfinite(w_app):
-        # seen face-on: the face is the length or the width, whichever its apparent width is closer to
-        tan_is_length = abs(w_app - L[1]) <= abs(w_app - W[1])
-        if w_app > W[2] * 1.1:
-            tan_is_length = True
-        dims[tan_axis], dims[depth_axis] = (L, W) if tan_is_length else (W, L)
+    support = pc.legged and ev.support_obs > ev.corner_obs and max(d_obs) <= pc.leg_size_max * 1.5
+    if depth_axis < 0 or support:
+        # no viewpoint (or a central support): the points are the object's centre
+        a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
+        if support and np.isfinite(w_app):
+            a = b = float(np.clip(w_app, W[0], L[2]))
+        size = np.array([max(d_obs[0], a if d_obs[0] >= d_obs[1] else b), max(d_obs[1], b if d_obs[0] >= d_obs[1] else a)])
+        return Footprint(center0, th, float(size[0]), float(size[1]))
 
-    # feasible interval of the centre along each axis (rectangle coordinates) and the prior's weight
+    # tangential extent: the observed one if it covers the box's apparent width, else the apparent width
+    tan_complete = np.isfinite(w_app) and d_obs[tan_axis] >= 0.75 * w_app
+    if tan_complete:
+        t_tan = float(d_obs[tan_axis])
+    elif np.isfinite(w_app):
+        t_tan = float(np.clip(w_app, max(d_obs[tan_axis], W[0]), L[2]))
+    else:
+        t_tan = float(max(d_obs[tan_axis], L[1] if d_obs[tan_axis] > W[2] else W[1]))
+    dep_nom, dep_min, dep_max = depth_for_width(t_tan, pc)
+    tan_max = L[2] if t_tan > W[2] else max(L[2], W[2])
+
     s_lo, s_hi, s_prior, size, lam = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.ones(2)
     for i in range(2):
-        dmin, dnom, dmax = dims[i]
-        if d_obs[i] > dmax * 1.15:
+        cap = tan_max if i == tan_axis else max(dep_max, W[2])
+        if d_obs[i] > cap * 1.15:
             # over-extended evidence (background points): the object is somewhere inside it
-            size[i] = dmax
-            s_lo[i], s_hi[i] = lo[i] + dmax / 2, hi[i] - dmax / 2
+            size[i] = cap
+            s_lo[i], s_hi[i] = lo[i] + cap / 2, hi[i] - cap / 2
             w = ev.hits.astype(np.float64)
             proj = ev.points @ axes[i]
             s_prior[i] = float(np.clip(np.sum(proj * w) / max(np.sum(w), 1e-9), s_lo[i], s_hi[i]))
-        elif (i == tan_axis and tan_complete) or (i != tan_axis and d_obs[i] >= dnom) or (i == depth_axis and side[i] == 0):
-            size[i] = max(d_obs[i], dmin)
+        elif i == tan_axis:
+            if tan_complete:
+                size[i] = d_obs[i]
+                slack = 0.05 * d_obs[i] + 0.01
+                s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
+            else:
+                # incomplete (occluded, or legs): it spans the observed part and at most its size; the rays decide
+                t_max = max(d_obs[i], 1.25 * t_tan)
+                size[i] = max(d_obs[i], t_tan)
+                s_lo[i], s_hi[i] = hi[i] - t_max / 2, lo[i] + t_max / 2
+                lam[i] = 0.1
+            s_prior[i] = mid[i]
+        elif side[i] == 0 or d_obs[i] >= dep_nom:
+            size[i] = d_obs[i]
             slack = 0.05 * d_obs[i] + 0.01
             s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
             s_prior[i] = mid[i]
-        elif i == depth_axis:
-            # seen from one side only: the object extends away from the robot up to its class size
+        else:
+            # seen from one side only: the object extends away from the robot by its depth
             sgn = side[i]
             face = hi[i] if sgn > 0 else lo[i]
-            t_nom, t_min, t_max = max(d_obs[i], dnom), max(d_obs[i], dmin), max(d_obs[i], dmax)
+            t_nom, t_min, t_max = max(d_obs[i], dep_nom), max(d_obs[i], dep_min), max(d_obs[i], dep_max)
             size[i] = t_nom
             c_min, c_max = face - sgn * t_min / 2, face - sgn * t_max / 2
             s_lo[i], s_hi[i] = min(c_min, c_max), max(c_min, c_max)
             s_prior[i] = face - sgn * t_nom / 2
-        else:
-            # tangential and incomplete (occluded, or legs): the object spans the observed part and at most
-            # its size; the bisector rays decide where
-            t_est = float(np.clip(w_app, dmin, dmax)) if np.isfinite(w_app) else dnom
-            t_max = max(d_obs[i], min(dmax, t_est * 1.25) if np.isfinite(w_app) else dmax)
-            size[i] = max(d_obs[i], t_est)
-            s_lo[i], s_hi[i] = hi[i] - t_max / 2, lo[i] + t_max / 2
-            s_prior[i] = mid[i]
-            lam[i] = 0.1
 
     # least squares: the centre near every weighted bisector ray, regularised towards the prior
     H = ray_prior_weight * np.diag(lam)
@@ -418,10 +480,11 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
         w = wts[use]
         H = H + (n_rect * w[:, None]).T @ n_rect
         g = g + (n_rect * (w * np.sum(n_rect * o_rect, axis=1))[:, None]).sum(axis=0)
-    s = _box_qp(H, g, s_lo, s_hi)
+    s_opt = _box_qp(H, g, s_lo, s_hi)
     # the rectangle must still cover the observed points (unless they are over-extended)
     for i in range(2):
-        if d_obs[i] <= dims[i][2] * 1.15:
-            size[i] = max(size[i], 2.0 * max(s[i] - lo[i], hi[i] - s[i]))
-    center = axes.T @ s
+        cap = tan_max if i == tan_axis else max(dep_max, W[2])
+        if d_obs[i] <= cap * 1.15:
+            size[i] = max(size[i], 2.0 * max(s_opt[i] - lo[i], hi[i] - s_opt[i]))
+    center = axes.T @ s_opt
     return Footprint(center, th, float(size[0]), float(size[1]))

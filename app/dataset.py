@@ -10,8 +10,9 @@ object's visible pixels, kept when enough of the object is visible.
 render of the object *alone* (its own small pybullet client) through an off-centre projection that
 covers exactly the object's projected bounding box on the camera's image plane extended past the frame,
 at the same pixel scale (:class:`app.labels.SilhouetteRenderer`). Occlusion by other geometry and
-truncation by the frame edge therefore both lower the fraction, with the renderer's own rasterisation
-on both sides of the ratio (a fully visible object scores 1.0).
+truncation by the side and bottom frame edges therefore both lower the fraction, with the renderer's
+own rasterisation on both sides of the ratio (a fully visible object scores 1.0). What lies above the
+top edge does not count: the robot's low, level camera cuts every door, shelf and person there.
 
 **Domain randomisation** (per world, re-drawn every ``rerandomize_every`` images): light direction,
 colour and intensity (ambient/diffuse/specular, sometimes shadows); floor and wall colours and

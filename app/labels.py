@@ -16,9 +16,10 @@ a false positive (COCO ``iscrowd``).
 ``full_pixels`` comes from :class:`SilhouetteRenderer`: each object is built *alone* in its own small
 pybullet client (from the same catalogue parts as the simulator) and rendered through an off-centre
 projection (:func:`frustum_matrix`) that covers exactly the window of its projected bounding box on the
-camera's image plane extended past the frame, at the same pixel scale. Occlusion by anything and
-truncation by the frame edge both lower the fraction, with the same rasteriser on both sides of the
-ratio, so a fully visible object scores 1.0. The rest of this module is numpy only.
+camera's image plane extended past the frame (left, right and bottom; not above the top edge, which
+cuts every tall object seen from the robot's low camera), at the same pixel scale. Occlusion by
+anything and truncation by the side and bottom edges both lower the fraction, with the same rasteriser
+on both sides of the ratio, so a fully visible object scores 1.0. The rest of this module is numpy only.
 """
 
 from __future__ import annotations
@@ -152,9 +153,11 @@ def silhouette_window(
     height: int,
     near: float,
     margin: float = 1.0,
+    margin_top: float | None = None,
 ) -> tuple[int, int, int, int] | None:
     """The pixel window ``(u0, v0, u1, v1)`` (exclusive ends) that holds an object's whole silhouette on
-    the camera's image plane *extended past the frame* by ``margin`` frame sizes on every side.
+    the camera's image plane *extended past the frame* by ``margin`` frame sizes to the left, right and
+    bottom and ``margin_top`` (default: ``margin``) above the top edge.
 
     ``points_cam`` are ``(N, 3)`` points bounding the object (e.g. its AABB corners) in the optical frame
     (z forward, x right, y down). Points behind the near plane make the projection unbounded on that
@@ -163,7 +166,7 @@ def silhouette_window(
     """
     p = np.asarray(points_cam, dtype=np.float64)
     lo_u, hi_u = -margin * width, (1 + margin) * width
-    lo_v, hi_v = -margin * height, (1 + margin) * height
+    lo_v, hi_v = -(margin if margin_top is None else margin_top) * height, (1 + margin) * height
     front = p[:, 2] > near
     if not np.any(front):
         return None
@@ -246,10 +249,17 @@ class SilhouetteRenderer:
         object_ids,
         *,
         margin: float = 1.0,
+        margin_top: float = 0.0,
         max_pixels: int | None = None,
     ) -> dict[int, int]:
         """``{object id: pixel area}`` of each object alone in the camera ``K`` at ``T_world_camera``
-        (optical frame, z forward), on the image plane extended ``margin`` frame sizes past each edge.
+        (optical frame, z forward), on the image plane extended ``margin`` frame sizes past the left,
+        right and bottom edges and ``margin_top`` above the top edge.
+
+        ``margin_top = 0`` (the default) does not count what lies above the frame: the robot's low,
+        level camera cuts every tall object (doors, shelves, people) at the top edge, which is how it
+        always sees them, and they stay recognisable from their lower part; objects cut at the sides
+        or the bottom lose the parts that tell them apart (a table leg is no table).
         Windows larger than ``max_pixels`` (default 16384: counts to about 1 %) are rendered coarser and
         scaled back."""
         import pybullet as p
@@ -264,7 +274,7 @@ class SilhouetteRenderer:
             if not 0 <= oid < len(self.world.objects):
                 continue
             cid, bodies, corners = self._client(oid)
-            win = silhouette_window((T_cam_world @ corners.T).T[:, :3], K, width, height, self.near, margin)
+            win = silhouette_window((T_cam_world @ corners.T).T[:, :3], K, width, height, self.near, margin, margin_top)
             if win is None:
                 out[oid] = 0
                 continue

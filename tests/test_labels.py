@@ -157,3 +157,26 @@ def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
     assert 0.0 < labels[1].visible_fraction < 0.9
     right = labels[2]
     assert right.x2 == W and 0.2 < right.visible_fraction < 0.8
+
+
+def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:
+    """The low camera cuts a person at 1 m at the top edge: still fully 'visible'; cut at the side, not."""
+    from app.config import Config
+    from app.labels import SilhouetteRenderer
+    from app.ocslam.se2 import Pose2
+    from app.sim_world import SimWorld
+    from app.worlds import World, WorldObject
+
+    world = World(name="person", objects=[WorldObject("person", "person", 1.0, 0.0, yaw=3.14)])
+    W, H = 160, 120
+    with SimWorld(world, Config()) as sim, SilhouetteRenderer(world) as sil:
+        frame = sim.render_view(Pose2(0.0, 0.0, 0.0), width=W, height=H, segmentation=True)
+        x1, y1, x2, y2, n = visible_boxes(frame.segmentation)[0]
+        assert y1 == 0 and 0 < x1 < x2 < W  # cut at the top only
+        top_free = sil.counts(frame.T_world_camera, frame.info.K, W, H, [0])[0]
+        top_counted = sil.counts(frame.T_world_camera, frame.info.K, W, H, [0], margin_top=1.0)[0]
+        assert n / top_free == pytest.approx(1.0, abs=0.03)
+        assert n / top_counted < 0.7
+        side = sim.render_view(Pose2(0.0, 0.0, 0.45), width=W, height=H, segmentation=True)  # person at the right edge
+        vb = visible_boxes(side.segmentation)[0]
+        assert vb[2] == W and vb[4] / sil.counts(side.T_world_camera, side.info.K, W, H, [0])[0] < 0.8

@@ -64,6 +64,12 @@ def run(args: argparse.Namespace) -> int:
         randomize=not args.no_randomize,
         command=command_line(),
     )
+    import signal
+
+    def _stop(signum, frame):  # SIGTERM (e.g. kill of a background run) stops the worker processes too
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _stop)
     meta = build_dataset(opts, progress=not args.quiet)
     print(
         f"wrote {args.out}: {meta['images']['train']} train / {meta['images']['val']} val images, "

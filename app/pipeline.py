@@ -44,6 +44,9 @@ from app.ocslam.sync import PoseBuffer, ScanBuffer, reproject_scan
 
 log = logging.getLogger(__name__)
 
+#: autonomy (route, go-to, exploration) control rate in sim time
+CONTROL_HZ = 20.0
+
 STAGES = ("physics", "lidar", "render", "detector", "slam", "consciousness", "ui")
 
 
@@ -189,6 +192,9 @@ class Pipeline:
         self._explorer = None
         self._nav_path_map: np.ndarray | None = None
         self.paused = False
+        self._next_control = 0.0
+        self._grid_cache = None
+        self._grid_cache_t = -1e9
 
         # ground truth logs (evaluation only)
         self.truth_log: list[tuple[float, Pose2, Pose2]] = []  # (stamp, T_map_base true, T_odom_base)
@@ -196,6 +202,8 @@ class Pipeline:
         self._last_true: Pose2 | None = None
         self.coverage_log: list[tuple[float, float]] = []
         self._true_free_area: float | None = None
+        self._true_free: np.ndarray | None = None
+        self.exploration_done_time: float | None = None
         self.wall_start = time.perf_counter()
         self.wall_time_s = 0.0
 
@@ -295,6 +303,8 @@ class Pipeline:
         return navigation
 
     def stop_autonomy(self, status: str = "") -> None:
+        if self._explorer is not None:
+            self._explorer.stop()
         self.drive_mode = "idle"
         self._route = None
         self._explorer = None
@@ -318,7 +328,7 @@ class Pipeline:
     def go_to(self, goal_map_xy: tuple[float, float]) -> bool:
         """Plan an A* path on the SLAM grid to ``goal_map_xy`` and follow it."""
         nav = self._navigation()
-        grid = self.slam.occupancy_grid()
+        grid = self.grid()
         start = self.T_map_base
         path = nav.plan_path(grid, (start.x, start.y), goal_map_xy, self.cfg.robot.footprint_radius_m + 0.03)
         if path is None:
@@ -331,10 +341,12 @@ class Pipeline:
         return True
 
     def explore(self) -> None:
+        """Frontier exploration until no reachable frontier is left (or the user takes over)."""
         nav = self._navigation()
-        self._explorer = nav.FrontierExplorer(self.cfg.robot.footprint_radius_m + 0.03)
-        self._ensure_follower().clear()
+        self._explorer = nav.ExplorationController(self.cfg.robot)
+        self._explorer.start()
         self._nav_path_map = None
+        self.exploration_done_time = None
         self.drive_mode = "explore"
         self.nav_status = "exploring"
 
@@ -342,6 +354,13 @@ class Pipeline:
         if self._follower is None:
             self._follower = self._navigation().PathFollower(self.cfg.robot)
         return self._follower
+
+    def grid(self):
+        """The SLAM occupancy grid, rebuilt at most at ``slam.map_hz`` (sim time) for planning."""
+        if self._grid_cache is None or self.time - self._grid_cache_t >= 1.0 / self.cfg.slam.map_hz:
+            self._grid_cache = self.slam.occupancy_grid()
+            self._grid_cache_t = self.time
+        return self._grid_cache
 
     def _control(self) -> Twist:
         manual = self.manual_cmd() if self.manual_cmd is not None else Twist()
@@ -352,40 +371,34 @@ class Pipeline:
             return manual
         if self.drive_mode == "teleop":
             self.drive_mode = "idle"
+        if self.drive_mode in ("idle", "teleop"):
+            return Twist()
+        if self.time < self._next_control - 1e-9:
+            return self.cmd  # autonomy runs at CONTROL_HZ; hold the command in between
+        self._next_control = self.time + 1.0 / CONTROL_HZ
         scan = self.last_scan
+        T = self.T_map_base
         if self.drive_mode == "route" and self._route is not None:
-            twist = self._route.compute(self.T_map_base, scan, self.T_base_scan)
+            twist = self._route.compute(T, scan, self.T_base_scan)
             if self._route.done:
                 self.stop_autonomy("route done")
                 return Twist()
             return twist
         if self.drive_mode == "goto" and self._follower is not None:
-            twist = self._follower.compute(self.T_map_base, scan, self.T_base_scan)
-            if self._follower.status in ("arrived",):
+            twist = self._follower.compute(T, scan, self.T_base_scan)
+            if self._follower.status == "arrived":
                 self.stop_autonomy("arrived")
                 return Twist()
             return twist
         if self.drive_mode == "explore" and self._explorer is not None:
-            return self._explore_step(scan)
-        return Twist()
-
-    def _explore_step(self, scan: LaserScan | None) -> Twist:
-        follower = self._ensure_follower()
-        if follower.status in ("idle", "arrived", "blocked") and self.time >= getattr(self, "_explore_next_plan", 0.0):
-            if follower.status == "blocked" and self._nav_path_map is not None and len(self._nav_path_map):
-                self._explorer.mark_failed(self._nav_path_map[-1])
-            grid = self.slam.occupancy_grid()
-            nxt = self._explorer.next_goal(grid, self.T_map_base)
-            if nxt is None:
-                self.stop_autonomy("exploration done: no reachable frontier left")
+            twist = self._explorer.compute(self.grid(), T, scan, self.T_base_scan, now=self.time)
+            self._nav_path_map = self._explorer.path
+            if self._explorer.status == "done":
                 self.exploration_done_time = self.time
+                self.stop_autonomy("exploration done: no reachable frontier left")
                 return Twist()
-            goal, path = nxt
-            follower.set_path(path)
-            self._nav_path_map = path
-            self._explore_next_plan = self.time + 0.5
-        twist = follower.compute(self.T_map_base, scan, self.T_base_scan)
-        return twist
+            return twist
+        return Twist()
 
     # ---------------------------------------------------------------------------------------------
     # the step
@@ -580,6 +593,64 @@ class Pipeline:
         out["map_precision"] = float(p)
         out["map_recall"] = float(r)
         return out
+
+    # -- exploration coverage (evaluation only: uses the world's true geometry) ------------------
+    def _true_free_cells(self, res: float = 0.05) -> np.ndarray:
+        """``(N, 2)`` centres, in the map frame, of the true free cells reachable from the start."""
+        if getattr(self, "_true_free", None) is not None:
+            return self._true_free
+        import shapely
+        from scipy import ndimage
+
+        xmin, ymin, xmax, ymax = self.world.bounds()
+        xs = np.arange(xmin + res / 2, xmax, res)
+        ys = np.arange(ymin + res / 2, ymax, res)
+        gx, gy = np.meshgrid(xs, ys)
+        blocked = np.zeros(gx.shape, dtype=bool)
+        for _, geom in self.world.blocking_geometry():
+            blocked |= shapely.contains_xy(geom, gx, gy)
+        labels, _ = ndimage.label(~blocked)
+        s = self.T_world_start
+        i = int(np.clip(round((s.y - ymin) / res - 0.5), 0, len(ys) - 1))
+        j = int(np.clip(round((s.x - xmin) / res - 0.5), 0, len(xs) - 1))
+        reach = labels == labels[i, j] if labels[i, j] else ~blocked
+        pts_world = np.column_stack([gx[reach], gy[reach]])
+        self._true_free = self.T_map_world.transform_points(pts_world)
+        self._true_free_area = float(len(pts_world) * res * res)
+        return self._true_free
+
+    def coverage(self) -> float:
+        """Explored free area / true free area: the fraction of truly free, reachable cells the SLAM grid
+        knows as free."""
+        pts = self._true_free_cells()
+        if not len(pts) or not self.cfg.slam.enabled:
+            return 0.0
+        grid = self.slam.occupancy_grid()
+        if not grid.width:
+            return 0.0
+        rc = grid.world_to_cell(pts)
+        ok = (rc[:, 0] >= 0) & (rc[:, 0] < grid.height) & (rc[:, 1] >= 0) & (rc[:, 1] < grid.width)
+        vals = grid.data[rc[ok, 0], rc[ok, 1]]
+        return float(np.count_nonzero((vals >= 0) & (vals < 50)) / len(pts))
+
+    def sample_coverage(self) -> float:
+        c = self.coverage()
+        self.coverage_log.append((self.time, c))
+        return c
+
+    def coverage_summary(self) -> dict[str, Any]:
+        """``coverage`` (final) and ``coverage_time_s``: when exploration ended (no reachable frontier left),
+        or the last sample; plus when 90 % was first reached."""
+        final = self.sample_coverage()
+        t90 = next((t for t, c in self.coverage_log if c >= 0.9), None)
+        done = getattr(self, "exploration_done_time", None)
+        return {
+            "coverage": round(final, 4),
+            "coverage_time_s": round(done if done is not None else self.time, 2),
+            "coverage_90_time_s": None if t90 is None else round(t90, 2),
+            "true_free_area_m2": round(self._true_free_area or 0.0, 2),
+            "exploration_complete": done is not None,
+        }
 
     def object_report(self):
         from app.ocslam.evaluation import evaluate_objects

@@ -115,6 +115,8 @@ def run_headless(
             pipe.step()
             if pipe.drive_mode == "idle" and pipe.nav_status:
                 break  # route done / exploration done / stopped
+            if explore and pipe.time - (pipe.coverage_log[-1][0] if pipe.coverage_log else -99.0) >= 5.0:
+                pipe.sample_coverage()
             if bar is not None and pipe.time - last_shown >= 1.0:
                 bar.update(round(pipe.time - last_shown))
                 last_shown = round(pipe.time)
@@ -127,7 +129,7 @@ def run_headless(
         summary = pipe.summary()
         summary["end_reason"] = "interrupted" if interrupted["flag"] else (pipe.nav_status or "duration")
         if explore:
-            summary.update(pipe.coverage_summary() if hasattr(pipe, "coverage_summary") else {})
+            summary.update(pipe.coverage_summary())
         try:
             from app.session import save_session
 

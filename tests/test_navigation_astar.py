@@ -15,6 +15,8 @@ from app.ocslam.se2 import Pose2
 
 RES = 0.05
 R = 0.105
+PAD = 0.025  # plan_path's default inflation padding
+RP = R + PAD
 
 
 def grid_of(data: np.ndarray, origin: Pose2 = Pose2()) -> OccupancyGrid:
@@ -60,9 +62,9 @@ def upper_hull_length(points: np.ndarray) -> float:
 def test_path_around_a_wall_is_near_the_shortest() -> None:
     """A wall from the bottom edge up to y = 2 m, start and goal 1 m on either side at y = 0.5 m.
 
-    The robot's centre may not enter the inflated cells (squares), which form one obstacle standing on
-    the bottom edge, so the shortest path from start to goal is the upper convex hull of the start, the
-    goal and the corners of the blocked squares. With clearance_weight=0 the planner must be within 2 %.
+    The robot's centre may not enter the inflated cells (squares; radius + the default padding), which
+    form one obstacle standing on the bottom edge, so the shortest path from start to goal is the upper
+    convex hull of the start, the goal and the corners of the blocked squares. With clearance_weight=0 the planner must be within 2 %.
     """
     d = np.zeros((80, 80), dtype=np.int8)
     d[:40, 40] = 100  # wall cells: centres x = 2.025, y up to 1.975
@@ -70,11 +72,12 @@ def test_path_around_a_wall_is_near_the_shortest() -> None:
     start, goal = np.array([1.025, 0.5]), np.array([3.025, 0.5])
     path = plan_path(g, start, goal, R, clearance_weight=0.0)
     assert path is not None
-    blocked = inflate(g, R)
+    blocked = inflate(g, RP)
     rows, cols = np.nonzero(blocked)
     corners = np.concatenate([np.stack([(cols + dx) * RES, (rows + dy) * RES], 1) for dx in (0, 1) for dy in (0, 1)])
     shortest = upper_hull_length(np.vstack([start, goal, corners]))
-    assert shortest == pytest.approx(2 * math.hypot(0.875, 1.5) + 4 * math.sqrt(2) * RES + RES)  # by hand
+    # by hand: the blocked squares' top corners are (1.9, 2.05), (1.95, 2.1), (2.1, 2.1), (2.15, 2.05)
+    assert shortest == pytest.approx(2 * math.hypot(0.875, 1.55) + 2 * math.sqrt(2) * RES + 3 * RES)
     assert shortest - 1e-9 <= length(path) <= 1.02 * shortest
     assert not crosses(path, blocked)
 
@@ -220,23 +223,23 @@ def test_paths_never_cross_inflated_cells(world, weight) -> None:
     d, start, goal = world
     g = grid_of(d)
     path = plan_path(g, start, goal, R, clearance_weight=weight, goal_snap_radius_m=0.0)
-    blocked = inflate(g, R)
+    blocked = inflate(g, RP)
     s_cell = (int(start[1] / RES), int(start[0] / RES))
     g_cell = (int(goal[1] / RES), int(goal[0] / RES))
     if path is None:
         # only when there is no 8-connected (no corner cutting) route through free cells
-        cm = build_costmap(g, R, start_xy=start, crop=False, clearance_weight=weight)
+        cm = build_costmap(g, RP, start_xy=start, crop=False, clearance_weight=weight)
         dist, _ = cost_to_go(cm, s_cell)
         assert blocked[g_cell] or not np.isfinite(dist[g_cell])
         return
     assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
     assert not blocked[g_cell]
-    # A start inside the inflation may leave it through the cells of its escape disk (radius R + 2 cells,
+    # A start inside the inflation may leave it through the cells of its escape disk (radius R + padding + 2 cells,
     # measured between cell centres), never through an occupied cell; everything else stays out.
     r, c, p = dense_cells(path)
     bad = blocked[r, c]
     if blocked[s_cell]:
-        near = np.hypot(r - s_cell[0], c - s_cell[1]) * RES <= R + 2 * RES + 1e-9
+        near = np.hypot(r - s_cell[0], c - s_cell[1]) * RES <= RP + 2 * RES + 1e-9
         bad &= ~near
     assert not bad.any(), p[bad][:5]
     assert not (d[r, c] >= 65).any() or d[s_cell] >= 65

@@ -187,8 +187,9 @@ def build_costmap(
         robot_radius_m: circumscribed radius used for inflation.
         start_xy: ``(2,)`` robot position. When its cell is blocked (the robot is inside the inflation band,
             or even on an occupied cell because of map noise), the non-occupied cells within
-            ``escape_radius_m`` (default ``radius + 2·res``) become traversable at ``escape_cost`` so the
-            planner can leave; the start cell itself is always made traversable.
+            ``escape_radius_m`` (default ``radius + 2·res``) that are no closer to an obstacle than the
+            start cell become traversable at ``escape_cost`` so the planner can leave without going
+            deeper; the start cell itself is always made traversable.
         keep_xy: ``(N, 2)`` further points (e.g. the goal) that the crop must contain.
         extra_obstacles_xy: ``(M, 2)`` points whose cells count as occupied (virtual obstacles: places
             where the robot got stuck against something its LIDAR does not see, like glass).
@@ -273,9 +274,12 @@ def _add_escape(cm: CostMap, start_xy: NDArray[np.float64], radius_m: float, esc
     c0, c1 = max(0, cell[1] - k), min(w, cell[1] + k + 1)
     rr, cc = np.mgrid[r0:r1, c0:c1]
     d = np.hypot(rr - cell[0], cc - cell[1]) * cm.resolution
-    # the robot's own disk: everything but occupied cells (unknown ones included: the robot stands there),
-    # as far as it is connected to the start without crossing an occupied cell
+    # the robot's own disk: the cells no closer to an obstacle than the start cell (the way out never
+    # goes deeper into the band; unknown cells included: the robot stands there), as far as they are
+    # connected to the start
+    start_clearance = float(cm.clearance[cell[0], cell[1]])
     disk = (d <= escape_radius_m) & ~cm.occupied[r0:r1, c0:c1]
+    disk &= cm.clearance[r0:r1, c0:c1] >= start_clearance - 1e-6
     disk[cell[0] - r0, cell[1] - c0] = True
     lab, _ = ndimage.label(disk, structure=np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool))
     win = (lab == lab[cell[0] - r0, cell[1] - c0]) & ~cm.traversable[r0:r1, c0:c1]

@@ -1,16 +1,19 @@
 """Frontier-based autonomous exploration.
 
 :class:`FrontierExplorer` picks where to go: every frontier cluster (:mod:`.frontiers`) gets an *approach
-cell*, the reachable unblocked cell within ``approach_radius_m`` of one of its cells with the cheapest
-path from the robot (one Dijkstra search ranks them all). Its cost is ``path cost − gain_weight ×
+cell*, the reachable, observed, unblocked cell within ``approach_radius_m`` of one of its cells (and in
+line of sight of it) with the cheapest path from the robot (one Dijkstra search ranks them all). Its cost is ``path cost − gain_weight ×
 frontier length``; the cheapest wins. Frontiers without a reachable approach cell (behind walls, in
 narrow gaps, outside the apartment seen through an opening too small for the robot) are skipped, and
 so are approach cells near blacklisted points (goals that failed or were reached without clearing
 their frontier). Unknown cells may be crossed at ``unknown_cost`` times the normal cost, so frontiers
 in the middle of big rooms (beyond the LIDAR's range) are handled like any other.
 
-Hysteresis: the current goal is kept while it stays valid (still next to a frontier, reachable, not
-blacklisted) unless another frontier becomes cheaper by more than ``switch_margin_m``.
+Against oscillation: the current goal is kept while it stays valid (still next to a frontier,
+reachable, not blacklisted) unless another frontier becomes cheaper by more than ``switch_margin_m``; a
+goal whose frontier vanishes while the robot is within ``visit_radius_m`` counts as visited
+(blacklisted), and a place given up ``max_abandons`` times for other goals (a frontier that flickers
+in a noisy map) is blacklisted too.
 
 :class:`ExplorationController` drives the loop: it asks the explorer for a goal whenever the map
 changes (at most every ``replan_period_s``), follows the path with a :class:`~.follower.PathFollower`,
@@ -50,6 +53,9 @@ class FrontierExplorer:
         switch_margin_m: float = 1.0,
         keep_slack_m: float = 0.3,
         goal_clearance_m: float = 0.12,
+        inflation_padding_m: float = 0.025,
+        visit_radius_m: float = 0.6,
+        max_abandons: int = 3,
         clearance_m: float = 0.3,
         clearance_weight: float = 3.0,
         occupied_threshold: int = OCCUPIED_THRESHOLD,
@@ -66,6 +72,10 @@ class FrontierExplorer:
         self.switch_margin_m = float(switch_margin_m)
         self.keep_slack_m = float(keep_slack_m)
         self.goal_clearance_m = float(goal_clearance_m)
+        self.inflation_padding_m = float(inflation_padding_m)
+        self.visit_radius_m = float(visit_radius_m)
+        self.max_abandons = int(max_abandons)
+        self._abandoned: list[list] = []  # [point (2,), count]
         self.clearance_m = float(clearance_m)
         self.clearance_weight = float(clearance_weight)
         self.occupied_threshold = int(occupied_threshold)
@@ -82,6 +92,7 @@ class FrontierExplorer:
         """Forget the blacklist, the virtual obstacles and the current goal."""
         self.blacklist.clear()
         self.virtual_obstacles.clear()
+        self._abandoned.clear()
         self.goal_xy = None
         self.path = None
         self.goal_frontier = None
@@ -113,7 +124,7 @@ class FrontierExplorer:
     def _costmap(self, grid: OccupancyGrid, robot_xy: NDArray[np.float64]) -> CostMap:
         return build_costmap(
             grid,
-            self.robot_radius_m,
+            self.robot_radius_m + self.inflation_padding_m,
             start_xy=robot_xy,
             occupied_threshold=self.occupied_threshold,
             unknown_is_obstacle=False,
@@ -137,6 +148,7 @@ class FrontierExplorer:
         self.frontiers = frontiers_from_labels(grid, labels, n, cm.row0, cm.col0)
         s_cell = cm.to_cells(robot[None])[0]
         if n == 0 or not cm.in_bounds(s_cell[None])[0]:
+            self._note_abandoned(self.goal_xy)
             return self._clear()
         start = (int(s_cell[0]), int(s_cell[1]))
         dist, pred = cost_to_go(cm, start)
@@ -153,22 +165,33 @@ class FrontierExplorer:
             & (cm.clearance >= self.robot_radius_m + self.goal_clearance_m)
         )
         sizes = np.array([f.size for f in self.frontiers], dtype=np.float64)
+        prev = self.goal_xy
 
         # keep the current goal while it stays valid (hysteresis), unless a frontier is much cheaper
         keep: tuple[tuple[int, int], float, int] | None = None
-        if self.goal_xy is not None and not self._blacklisted(self.goal_xy[None])[0]:
-            g = cm.to_cells(self.goal_xy[None])[0]
-            if cm.in_bounds(g[None])[0] and usable[g[0], g[1]] and (
-                dist_f[g[0], g[1]] * res <= self.approach_radius_m + self.keep_slack_m
+        if prev is not None and not self._blacklisted(prev[None])[0]:
+            g = cm.to_cells(prev[None])[0]
+            gr, gc = int(g[0]), int(g[1])
+            if (
+                cm.in_bounds(g[None])[0]
+                and usable[gr, gc]
+                and dist_f[gr, gc] * res <= self.approach_radius_m + self.keep_slack_m
+                and self._sees(cm, g[None, 0], g[None, 1], ir[gr, gc][None], ic[gr, gc][None])[0]
             ):
-                glab = int(near_label[g[0], g[1]])
-                keep = ((int(g[0]), int(g[1])), dist[g[0], g[1]] * res - self.gain_weight * sizes[glab - 1] * res, glab)
+                glab = int(near_label[gr, gc])
+                keep = ((gr, gc), dist[gr, gc] * res - self.gain_weight * sizes[glab - 1] * res, glab)
+            elif np.linalg.norm(prev - robot) <= self.visit_radius_m:
+                # its frontier vanished (or flickers) right next to the robot: call it visited
+                self.blacklist.append(prev.copy())
 
         rows, cols = np.nonzero(usable & (dist_f * res <= self.approach_radius_m))
+        ok = self._sees(cm, rows, cols, ir[rows, cols], ic[rows, cols])
+        rows, cols = rows[ok], cols[ok]
         xy = cm.to_xy(np.stack([rows, cols], axis=1))
         ok = ~self._blacklisted(xy)
         rows, cols, xy = rows[ok], cols[ok], xy[ok]
         if rows.size == 0 and keep is None:
+            self._note_abandoned(prev)
             return self._clear()
         if rows.size:
             lab = near_label[rows, cols]
@@ -180,10 +203,11 @@ class FrontierExplorer:
             best = int(first[np.argmin(score[first])])
         if keep is not None and (rows.size == 0 or score[best] >= keep[1] - self.switch_margin_m):
             goal_cell, goal_label = keep[0], keep[2]
-            goal_xy = self.goal_xy.copy()
+            goal_xy = prev.copy()
         else:
             goal_cell, goal_label = (int(rows[best]), int(cols[best])), int(lab[best])
             goal_xy = xy[best].copy()
+            self._note_abandoned(prev)
         cells = extract_path(pred, cm.shape[1], goal_cell)
         local = smooth_path(cm, cells, cm.to_local(robot[None])[0], None)
         if len(local) == 1:
@@ -193,6 +217,34 @@ class FrontierExplorer:
         self.path = path
         self.goal_frontier = self.frontiers[goal_label - 1]
         return self.goal_xy.copy(), path
+
+    @staticmethod
+    def _sees(
+        cm: CostMap, rows: NDArray[np.int64], cols: NDArray[np.int64], fr: NDArray[np.int64], fc: NDArray[np.int64]
+    ) -> NDArray[np.bool_]:
+        """``(N,)`` True where the straight line from cell ``(rows, cols)`` to its frontier cell
+        ``(fr, fc)`` crosses no occupied cell (an approach cell must see its frontier, not face it through
+        a wall). Sampled every half cell at most (approach radii are a few cells)."""
+        if len(rows) == 0:
+            return np.zeros(0, dtype=bool)
+        n = int(2 * max(1.0, float(np.max(np.hypot(fr - rows, fc - cols))))) + 2
+        t = np.linspace(0.0, 1.0, n)[None, :]
+        rr = np.rint(rows[:, None] + t * (fr - rows)[:, None]).astype(np.int64)
+        cc = np.rint(cols[:, None] + t * (fc - cols)[:, None]).astype(np.int64)
+        return ~cm.occupied[rr, cc].any(axis=1)
+
+    def _note_abandoned(self, goal: NDArray[np.float64] | None) -> None:
+        """Count a goal given up for another one; a place abandoned ``max_abandons`` times (its frontier
+        keeps appearing and vanishing) is blacklisted, which ends oscillations between goals."""
+        if goal is None:
+            return
+        for entry in self._abandoned:
+            if np.linalg.norm(entry[0] - goal) <= self.blacklist_radius_m:
+                entry[1] += 1
+                if entry[1] >= self.max_abandons:
+                    self.blacklist.append(goal.copy())
+                return
+        self._abandoned.append([goal.copy(), 1])
 
     def _blacklisted(self, xy: NDArray[np.float64]) -> NDArray[np.bool_]:
         """``(N,)`` True for points within ``blacklist_radius_m`` of a blacklisted point."""

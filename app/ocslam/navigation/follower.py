@@ -15,6 +15,8 @@ Safety stop (the scan's valid returns, mapped through ``T_base_scan`` and ``T_ma
   the robot's radius: the check radius defaults to ``0.75 × radius`` so that valid paths through tight
   gaps are not refused). Points already that close (a robot squeezed next to a wall) do not block a
   path that leads away from them.
+* *arc check*: the same test with the full footprint radius along the arc pure pursuit is about to
+  drive (it cuts corners); if that arc is not clear the robot turns in place towards the path first.
 * *bumper box*: a point right in front of the body (``0 < x <= radius + emergency_distance``,
   ``|y| <= bumper_half_width``, default ``0.85 × radius``, about the Burger's real half-width) forbids
   driving forward (pure pursuit cuts corners a little); the robot turns in place towards the path if
@@ -86,6 +88,7 @@ class PathFollower:
         stop_distance_m: float = 0.2,
         path_check_radius_m: float | None = None,
         bumper_half_width_m: float | None = None,
+        arc_check_radius_m: float | None = None,
         rotate_in_place_rad: float = 0.9,
         rotate_done_rad: float = 0.3,
         slowdown_distance_m: float = 0.5,
@@ -107,6 +110,7 @@ class PathFollower:
         self.path_check_radius_m = float(
             path_check_radius_m if path_check_radius_m is not None else 0.75 * self.radius
         )
+        self.arc_check_radius_m = float(arc_check_radius_m if arc_check_radius_m is not None else self.radius)
         self.bumper_half_width_m = float(
             bumper_half_width_m if bumper_half_width_m is not None else 0.85 * self.radius
         )
@@ -281,8 +285,36 @@ class PathFollower:
             v = min(v, max(self.min_linear_mps, self.max_linear_mps * min(1.0, room)))
         if abs(kappa) * v > self.max_angular_rps:
             v = max(self.max_angular_rps / abs(kappa), 0.0)
+        if not self._arc_clear(pts, kappa):
+            # the arc we are about to drive (pure pursuit cuts corners) grazes an obstacle the path
+            # avoids: turn in place towards the path first
+            if abs(alpha) > self._ALIGNED_RAD:
+                self._rotating = True
+                w = self.heading_gain * alpha
+                return Twist(0.0, math.copysign(min(max(abs(w), self.min_angular_rps), self.max_angular_rps), alpha))
+            self.status = BLOCKED
+            return Twist()
         w = float(np.clip(v * kappa, -self.max_angular_rps, self.max_angular_rps))
         return Twist(float(v), w)
+
+    def _arc_clear(self, pts_base: NDArray[np.float64], kappa: float) -> bool:
+        """True unless the circular arc of curvature ``kappa`` ahead (``stop_distance_m`` long) brings the
+        body (``arc_check_radius_m``, default the footprint radius) closer to a scan point (``(M, 2)``,
+        base frame) that is within that radius than the robot is now."""
+        if len(pts_base) == 0:
+            return True
+        d_now = np.hypot(pts_base[:, 0], pts_base[:, 1])
+        near = d_now <= self.stop_distance_m + self.arc_check_radius_m + 0.05
+        if not near.any():
+            return True
+        pts, d_now = pts_base[near], d_now[near]
+        s = np.arange(0.05, self.stop_distance_m + 1e-9, 0.05)
+        if abs(kappa) < 1e-6:
+            arc = np.stack([s, np.zeros_like(s)], 1)
+        else:
+            arc = np.stack([np.sin(kappa * s) / kappa, (1.0 - np.cos(kappa * s)) / kappa], 1)
+        d = np.linalg.norm(pts[:, None, :] - arc[None, :, :], axis=2)
+        return not ((d < self.arc_check_radius_m) & (d < d_now[:, None] - 0.01)).any()
 
 
 class RouteFollower:
@@ -293,6 +325,9 @@ class RouteFollower:
     progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
     current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
     skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
+
+    With no planner behind it to keep clearance from mapped obstacles, the follower's path check uses
+    the full footprint radius plus 2 cm by default (``path_check_radius_m``).
     """
 
     def __init__(
@@ -305,6 +340,7 @@ class RouteFollower:
         **follower_kwargs: float,
     ) -> None:
         self.waypoints = _as_path(waypoints_xy)
+        follower_kwargs.setdefault("path_check_radius_m", robot.footprint_radius_m + 0.02)
         self.follower = PathFollower(robot, **follower_kwargs)
         self.waypoint_tolerance_m = float(waypoint_tolerance_m)
         self.blocked_timeout_s = float(blocked_timeout_s)

@@ -10,12 +10,15 @@ Pure numpy/scipy/OpenCV; every point and pose is in the SLAM ``map`` frame.
     cmd_vel = follower.compute(T_map_base, scan, T_base_scan)
     controller = ExplorationController(RobotConfig()); controller.start()
     cmd_vel = controller.compute(grid, T_map_base, scan, T_base_scan, now)
+    goto = GoToController(RobotConfig(), clicked_xy)                  # click-to-go
+    cmd_vel = goto.compute(grid, T_map_base, scan, T_base_scan, now)  # goto.status: following/arrived/failed
 """
 
 from app.ocslam.navigation.astar import astar, cost_to_go, plan_path
 from app.ocslam.navigation.costmap import CostMap, build_costmap, inflate
 from app.ocslam.navigation.explorer import ExplorationController, FrontierExplorer
-from app.ocslam.navigation.follower import PathFollower, RouteFollower
+from app.ocslam.navigation.follower import PathFollower, RouteFollower, StuckDetector
+from app.ocslam.navigation.goto import GoToController
 from app.ocslam.navigation.frontiers import Frontier, find_frontiers
 
 __all__ = [
@@ -23,8 +26,10 @@ __all__ = [
     "ExplorationController",
     "Frontier",
     "FrontierExplorer",
+    "GoToController",
     "PathFollower",
     "RouteFollower",
+    "StuckDetector",
     "astar",
     "build_costmap",
     "cost_to_go",

@@ -33,7 +33,7 @@ from app.ocslam.config import RobotConfig
 from app.ocslam.messages import LaserScan, OccupancyGrid, Twist
 from app.ocslam.navigation.astar import cost_to_go, extract_path, local_to_xy, smooth_path
 from app.ocslam.navigation.costmap import OCCUPIED_THRESHOLD, CostMap, build_costmap
-from app.ocslam.navigation.follower import ARRIVED, BLOCKED, PathFollower
+from app.ocslam.navigation.follower import ARRIVED, BLOCKED, PathFollower, StuckDetector
 from app.ocslam.navigation.frontiers import FRONTIER_FREE_THRESHOLD, Frontier, frontiers_from_labels, label_frontiers
 from app.ocslam.se2 import Pose2
 
@@ -294,9 +294,7 @@ class ExplorationController:
         self.blocked_replan_s = float(blocked_replan_s)
         self.max_blocked_replans = int(max_blocked_replans)
         self.done_confirmations = int(done_confirmations)
-        self.stuck_time_s = float(stuck_time_s)
-        self.stuck_distance_m = float(stuck_distance_m)
-        self.stuck_min_cmd_mps = float(stuck_min_cmd_mps)
+        self.stuck = StuckDetector(time_s=stuck_time_s, distance_m=stuck_distance_m, min_cmd_mps=stuck_min_cmd_mps)
         self.stuck_events = 0
         self.status = "idle"
         self.goals_reached = 0
@@ -311,7 +309,8 @@ class ExplorationController:
         self._checkpoint_t = 0.0
         self._blocked_since: float | None = None
         self._blocked_replans = 0
-        self._history: list[tuple[float, float, float, float]] = []  # (t, x, y, commanded v)
+        self._stuck_now = False
+        self.stuck.reset()
 
     @property
     def goal_xy(self) -> NDArray[np.float64] | None:
@@ -338,27 +337,7 @@ class ExplorationController:
         self.explorer.mark_failed()
         self.goals_failed += 1
         self.follower.clear()
-        self._history.clear()
-
-    def _stuck(self, now: float, p: NDArray[np.float64]) -> bool:
-        """Driving forward for ``stuck_time_s`` without moving ``stuck_distance_m``: something the LIDAR
-        does not see (glass, a low obstacle) holds the robot."""
-        h = self._history
-        while h and now - h[0][0] > self.stuck_time_s:
-            h.pop(0)
-        if not h or now - h[0][0] < 0.9 * self.stuck_time_s:
-            return False
-        v = np.array([e[3] for e in h])
-        moved = max(math.hypot(e[1] - p[0], e[2] - p[1]) for e in h)
-        return bool(v.mean() >= self.stuck_min_cmd_mps and moved < self.stuck_distance_m)
-
-    def _add_stuck_obstacle(self, T_map_base: Pose2) -> None:
-        """A virtual wall piece across the heading, just ahead of the robot's front."""
-        r = self.robot.footprint_radius_m
-        res = 0.025
-        lateral = np.arange(-2.0 * r, 2.0 * r + res / 2, res)
-        ahead = np.full_like(lateral, r + 0.05)
-        self.explorer.add_virtual_obstacle(T_map_base.transform_points(np.stack([ahead, lateral], axis=1)))
+        self.stuck.reset()
 
     def compute(
         self,
@@ -388,9 +367,13 @@ class ExplorationController:
             elif now - self._checkpoint_t > self.progress_timeout_s:
                 self._fail_goal()
                 need_plan = True
-            if self.follower.path is not None and self._stuck(now, p):
+            if self._stuck_now:
+                # driven forward without moving: something the LIDAR does not see (glass) holds the robot
+                self._stuck_now = False
                 self.stuck_events += 1
-                self._add_stuck_obstacle(T_map_base)
+                self.explorer.add_virtual_obstacle(
+                    StuckDetector.obstacle_ahead(T_map_base, self.robot.footprint_radius_m)
+                )
                 self._fail_goal()
                 need_plan = True
             if self.follower.status == BLOCKED:
@@ -425,5 +408,5 @@ class ExplorationController:
                 self._blocked_replans = 0
             self.follower.set_path(path)
         twist = self.follower.compute(T_map_base, scan, T_base_scan)
-        self._history.append((now, float(p[0]), float(p[1]), twist.linear_x))
+        self._stuck_now = self.stuck.update(now, T_map_base, twist)
         return twist

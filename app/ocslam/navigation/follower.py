@@ -398,3 +398,45 @@ class RouteFollower:
             self._blocked_since = None
         self.status = self.follower.status
         return twist
+
+
+class StuckDetector:
+    """Notices a robot that is driven forward but does not move: something its LIDAR does not see (glass,
+    a low obstacle, a caster caught on a rug) holds it.
+
+    Feed every control step with :meth:`update`; it returns True once the commanded forward speed has
+    averaged at least ``min_cmd_mps`` over the last ``time_s`` while the robot stayed within
+    ``distance_m`` of where it was. :meth:`obstacle_ahead` gives the points of a short virtual wall
+    across the heading, just ahead of the robot's front, to keep the planner away from that spot.
+    """
+
+    def __init__(self, *, time_s: float = 3.0, distance_m: float = 0.05, min_cmd_mps: float = 0.05) -> None:
+        self.time_s = float(time_s)
+        self.distance_m = float(distance_m)
+        self.min_cmd_mps = float(min_cmd_mps)
+        self._history: list[tuple[float, float, float, float]] = []  # (t, x, y, commanded v)
+
+    def reset(self) -> None:
+        self._history.clear()
+
+    def update(self, now: float, T_map_base: Pose2, cmd: Twist) -> bool:
+        """Record one step (sim time ``now``, pose, the twist just commanded); True when stuck."""
+        h = self._history
+        h.append((float(now), float(T_map_base.x), float(T_map_base.y), float(cmd.linear_x)))
+        while h and now - h[0][0] > self.time_s:
+            h.pop(0)
+        if now - h[0][0] < 0.9 * self.time_s:
+            return False
+        v = sum(e[3] for e in h) / len(h)
+        moved = max(math.hypot(e[1] - T_map_base.x, e[2] - T_map_base.y) for e in h)
+        if v >= self.min_cmd_mps and moved < self.distance_m:
+            h.clear()
+            return True
+        return False
+
+    @staticmethod
+    def obstacle_ahead(T_map_base: Pose2, radius_m: float, spacing_m: float = 0.025) -> NDArray[np.float64]:
+        """``(K, 2)`` map-frame points of a wall piece ``4·radius`` wide, ``radius + 5 cm`` ahead."""
+        lateral = np.arange(-2.0 * radius_m, 2.0 * radius_m + spacing_m / 2, spacing_m)
+        ahead = np.full_like(lateral, radius_m + 0.05)
+        return T_map_base.transform_points(np.stack([ahead, lateral], axis=1))

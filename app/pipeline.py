@@ -187,7 +187,7 @@ class Pipeline:
         self.manual_cmd: Callable[[], Twist] | None = None  # teleop (set by the server)
         self.drive_mode = "idle"  # idle | teleop | route | goto | explore
         self.nav_status = ""
-        self._follower = None
+        self._goto = None
         self._route = None
         self._explorer = None
         self._nav_path_map: np.ndarray | None = None
@@ -305,12 +305,13 @@ class Pipeline:
     def stop_autonomy(self, status: str = "") -> None:
         if self._explorer is not None:
             self._explorer.stop()
+        if self._goto is not None:
+            self._goto.cancel()
+            self._goto = None
         self.drive_mode = "idle"
         self._route = None
         self._explorer = None
         self._nav_path_map = None
-        if self._follower is not None:
-            self._follower.clear()
         self.nav_status = status
 
     def follow_route(self, name: str) -> None:
@@ -326,16 +327,17 @@ class Pipeline:
         self.nav_status = f"route {name}: {len(pts_map)} waypoints"
 
     def go_to(self, goal_map_xy: tuple[float, float]) -> bool:
-        """Plan an A* path on the SLAM grid to ``goal_map_xy`` and follow it."""
+        """Click-to-go: drive to ``goal_map_xy`` along an A* path on the SLAM grid (inflated by the robot's
+        radius), replanning as the map grows. False if no path exists now."""
         nav = self._navigation()
-        grid = self.grid()
-        start = self.T_map_base
-        path = nav.plan_path(grid, (start.x, start.y), goal_map_xy, self.cfg.robot.footprint_radius_m + 0.03)
-        if path is None:
-            self.stop_autonomy(f"no path to ({goal_map_xy[0]:.2f}, {goal_map_xy[1]:.2f})")
+        self.stop_autonomy()
+        ctl = nav.GoToController(self.cfg.robot, goal_map_xy)
+        ctl.compute(self.grid(), self.T_map_base, self.last_scan, self.T_base_scan, now=self.time)
+        if ctl.status == "failed":
+            self.nav_status = f"no path to ({goal_map_xy[0]:.2f}, {goal_map_xy[1]:.2f})"
             return False
-        self._ensure_follower().set_path(path)
-        self._nav_path_map = path
+        self._goto = ctl
+        self._nav_path_map = ctl.path
         self.drive_mode = "goto"
         self.nav_status = f"going to ({goal_map_xy[0]:.2f}, {goal_map_xy[1]:.2f})"
         return True
@@ -349,11 +351,6 @@ class Pipeline:
         self.exploration_done_time = None
         self.drive_mode = "explore"
         self.nav_status = "exploring"
-
-    def _ensure_follower(self):
-        if self._follower is None:
-            self._follower = self._navigation().PathFollower(self.cfg.robot)
-        return self._follower
 
     def grid(self):
         """The SLAM occupancy grid, rebuilt at most at ``slam.map_hz`` (sim time) for planning."""
@@ -384,10 +381,11 @@ class Pipeline:
                 self.stop_autonomy("route done")
                 return Twist()
             return twist
-        if self.drive_mode == "goto" and self._follower is not None:
-            twist = self._follower.compute(T, scan, self.T_base_scan)
-            if self._follower.status == "arrived":
-                self.stop_autonomy("arrived")
+        if self.drive_mode == "goto" and self._goto is not None:
+            twist = self._goto.compute(self.grid(), T, scan, self.T_base_scan, now=self.time)
+            self._nav_path_map = self._goto.path
+            if self._goto.status in ("arrived", "failed"):
+                self.stop_autonomy("arrived" if self._goto.status == "arrived" else "go-to failed: no path")
                 return Twist()
             return twist
         if self.drive_mode == "explore" and self._explorer is not None:

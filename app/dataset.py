@@ -69,7 +69,7 @@ APARTMENT = "assets/worlds/apartment.yaml"
 class DatasetOptions:
     out: Path
     worlds: int = 40
-    per_world: int = 50
+    per_world: int = 45
     seed: int = 1
     imgsz: tuple[int, int] = (320, 240)
     workers: int = 2

@@ -1,6 +1,6 @@
 """Render an auto-labelled YOLO dataset from random worlds and the paper's apartment (split by world).
 
-    ocslam dataset --worlds 40 --per-world 50 --seed 1 --out datasets/sim [--workers 2] [--imgsz 320x240]
+    ocslam dataset --worlds 40 --per-world 45 --seed 1 --out datasets/sim [--workers 2] [--imgsz 320x240]
 
 World i is random_world(1000·seed + i); a seeded share of them (--val-fraction) is the validation split,
 the apartment is training data. Labels are the tight boxes of each object's visible pixels, kept when
@@ -16,7 +16,7 @@ from pathlib import Path
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--worlds", type=int, default=40, help="random worlds")
-    p.add_argument("--per-world", type=int, default=50, help="images per random world")
+    p.add_argument("--per-world", type=int, default=45, help="images per random world")
     p.add_argument("--seed", type=int, default=1, help="dataset seed (world i is random_world(1000·seed + i))")
     p.add_argument("--out", type=Path, required=True, help="output folder (e.g. datasets/sim)")
     p.add_argument("--workers", type=int, default=2, help="rendering processes")

@@ -3,8 +3,10 @@
 Needs the optional [train] extra (pip install -e '.[train]'). Runs fully offline on the CPU; about an
 hour on 2 cores with the defaults (see docs/detector.md):
 
-    ocslam dataset --worlds 40 --per-world 50 --seed 1 --out datasets/sim
+    ocslam dataset --worlds 40 --per-world 45 --seed 1 --out datasets/sim
     ocslam train-detector --data datasets/sim --hours 1
+
+Without a dataset at --data (default datasets/sim) it renders one with that recipe first.
 """
 
 from __future__ import annotations
@@ -13,8 +15,17 @@ import argparse
 from pathlib import Path
 
 
+#: The dataset recipe of the committed model (app.dataset.DatasetOptions defaults).
+DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out {out}"
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", type=Path, required=True, help="dataset folder (with data.yaml) from `ocslam dataset`")
+    p.add_argument(
+        "--data",
+        type=Path,
+        default=Path("datasets/sim"),
+        help="dataset folder (with data.yaml) from `ocslam dataset`; rendered with the default recipe if missing",
+    )
     p.add_argument("--model", default="yolov8n.yaml", help="ultralytics model yaml (no pretrained weights): yolov8n.yaml, yolo11n.yaml")
     p.add_argument("--imgsz", type=int, default=224, help="training image size (paper: 224)")
     p.add_argument("--epochs", type=int, default=60, help="maximum epochs")
@@ -53,6 +64,16 @@ def run(args: argparse.Namespace) -> int:
         opts.out_model = args.out
     if args.runs is not None:
         opts.runs_dir = args.runs
+    if args.data.is_dir() and not (args.data / "data.yaml").exists() and any(args.data.iterdir()):
+        print(f"ocslam train-detector: {args.data} exists but has no data.yaml", file=sys.stderr)
+        return 2
+    if not (args.data / "data.yaml").exists() and not args.data.is_file():
+        from app.dataset import DatasetOptions, build_dataset
+
+        recipe = DatasetOptions(out=args.data)
+        recipe.command = DEFAULT_DATASET_COMMAND.format(out=args.data)
+        print(f"no dataset at {args.data}: rendering one first ({recipe.command})")
+        build_dataset(recipe)
     try:
         res = train_detector(opts)
     except TrainingUnavailable as e:

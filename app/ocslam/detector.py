@@ -45,7 +45,7 @@ __all__ = [
 
 #: How to (re)make the committed model; named in every "missing/corrupt model" error.
 MAKE_MODEL_COMMAND = (
-    "ocslam dataset --worlds 40 --per-world 50 --seed 1 --out datasets/sim && "
+    "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out datasets/sim && "
     "ocslam train-detector --data datasets/sim   (needs: pip install -e '.[train]'; see docs/detector.md)"
 )
 

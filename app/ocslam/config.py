@@ -155,6 +155,9 @@ class SlamConfig:
     match_search_yaw_rad: float = param(0.35, min=0.0, max=3.15, unit="rad", help="scan-match window half-size (yaw)")
     match_yaw_step_rad: float = param(0.0175, min=0.001, max=0.2, unit="rad", help="correlative search yaw step")
     match_min_score: float = param(0.25, min=0.0, max=1.0, help="below this the scan keeps the odometry prediction")
+    match_direct_min_inliers: float = param(
+        0.7, min=0.0, max=1.0, help="refinement from the prediction is kept if this fraction of points fits the map"
+    )
     match_robust_m: float = param(0.03, min=0.001, max=1.0, unit="m", help="Cauchy scale of the refinement")
     prior_sigma_xy_m: float = param(0.1, min=0.001, max=10.0, unit="m", help="odometry prior σ per scan (xy)")
     prior_sigma_yaw_rad: float = param(0.1, min=0.001, max=10.0, unit="rad", help="odometry prior σ per scan (yaw)")
@@ -166,17 +169,26 @@ class SlamConfig:
     loop_search_radius_m: float = param(4.0, min=0.0, max=50.0, unit="m", help="loop candidates within this distance")
     loop_window_xy_m: float = param(1.5, min=0.05, max=20.0, unit="m", help="loop search window half-size (xy)")
     loop_window_yaw_rad: float = param(0.5, min=0.0, max=3.15, unit="rad", help="loop search window half-size (yaw)")
-    loop_min_score: float = param(0.55, min=0.0, max=1.0, step=0.01, help="loop closure acceptance score", live=True)
+    loop_window_growth: float = param(
+        0.02, min=0.0, max=1.0, help="loop window growth per metre travelled since the last closure (yaw: /5 rad)"
+    )
+    loop_window_max_xy_m: float = param(5.0, min=0.05, max=50.0, unit="m", help="loop search window cap (xy)")
+    loop_window_max_yaw_rad: float = param(1.0, min=0.0, max=3.15, unit="rad", help="loop search window cap (yaw)")
+    loop_min_score: float = param(0.45, min=0.0, max=1.0, step=0.01, help="loop closure acceptance score", live=True)
     loop_min_inliers: float = param(0.6, min=0.0, max=1.0, help="loop closure: inlier fraction after refinement")
+    loop_min_constraint: float = param(
+        0.0, min=0.0, max=1.0, help="loop closure: weakest/strongest translational constraint (rejects corridors)"
+    )
     loop_sigma_xy_m: float = param(0.05, min=0.0001, max=10.0, unit="m", help="σ of a loop edge (xy)")
     loop_sigma_yaw_rad: float = param(0.02, min=0.0001, max=10.0, unit="rad", help="σ of a loop edge (yaw)")
     loop_robust_scale: float = param(3.0, min=0.1, max=100.0, help="Cauchy kernel scale of loop edges (whitened)")
-    submap_keyframes: int = param(20, min=2, max=1000, help="keyframes per loop-closure submap")
+    submap_keyframes: int = param(30, min=2, max=1000, help="keyframes per loop-closure submap")
     loop_query_keyframes: int = param(5, min=1, max=100, help="keyframes in a loop query cloud")
+    loop_query_range_m: float = param(10.0, min=0.5, max=100.0, unit="m", help="loop query points within this range")
     loop_query_max_points: int = param(600, min=10, max=100000, help="loop query cloud size cap")
     loop_min_gap_keyframes: int = param(10, min=0, max=100000, help="extra keyframes between the local map and loop submaps")
-    loop_max_candidates: int = param(2, min=1, max=100, help="submaps searched per keyframe")
-    optimize_every_keyframes: int = param(5, min=1, max=1000, help="optimise at most this often while loops arrive")
+    loop_max_candidates: int = param(3, min=1, max=100, help="submaps searched per keyframe")
+    optimize_every_keyframes: int = param(10, min=1, max=1000, help="optimise at most this often while loops arrive")
     map_update_budget: int = param(200, min=1, max=100000, help="keyframes re-inserted into the grid per map update")
     map_hz: float = param(1.0, min=0.1, max=10.0, help="map rebuild / publish rate (live app)")
 

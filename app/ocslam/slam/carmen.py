@@ -9,7 +9,10 @@
   the log if it repeats (the sensor's saturation value), else 81.0 m.
 - ``PARAM robot_frontlaser_offset`` (metres along the robot's x axis) gives ``T_base_scan``.
 - Odometry at each scan's stamp: interpolated from the ``ODOM`` lines when the log has them, else the
-  ``odom_*`` pose inside the ``FLASER`` line.
+  ``odom_*`` pose inside the ``FLASER`` line. Interpolation is between the ``ODOM`` lines just before and
+  just after the scan *in the file*, with the time fraction clamped to ``[0, 1]``: some logs (Intel)
+  have ipc timestamps that jump back and forth by up to 0.6 s while the file order is the true order,
+  and this rule is the plain time interpolation wherever the timestamps are monotonic (ACES).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.ocslam.messages import LaserScan
-from app.ocslam.se2 import Pose2, interpolate
+from app.ocslam.se2 import Pose2, wrap_angle
 
 
 class CarmenError(ValueError):
@@ -99,6 +102,7 @@ def read_carmen(path: str | Path) -> CarmenLog:
     stamp_s: list[str] = []
     ranges: list[NDArray[np.float64]] = []
     fodom: list[tuple[float, float, float]] = []
+    prev_odom: list[int] = []  # index of the last ODOM line before each FLASER (-1: none)
     try:
         with _open(path) as fh:
             for line in fh:
@@ -122,6 +126,7 @@ def read_carmen(path: str | Path) -> CarmenLog:
                         stamps.append(float(tok[o + 6]))
                         stamp_s.append(tok[o + 6])
                         ranges.append(r)
+                        prev_odom.append(len(odom_t) - 1)
                 except ValueError:
                     continue
     except (OSError, EOFError) as e:
@@ -151,11 +156,8 @@ def read_carmen(path: str | Path) -> CarmenLog:
     except ValueError:
         offset = 0.0
     fo = np.array(fodom).reshape(-1, 3)
-    if len(odom_t) >= 2:
-        ot = np.array(odom_t)
-        op = np.array(odom_p)
-        order = np.argsort(ot, kind="stable")
-        odom = interpolate(st, ot[order], op[order])
+    if len(odom_t) >= 1:
+        odom = _interpolate_in_file_order(st, np.array(prev_odom), np.array(odom_t), np.array(odom_p))
     else:
         odom = fo.copy()
     return CarmenLog(
@@ -168,3 +170,19 @@ def read_carmen(path: str | Path) -> CarmenLog:
         params=params,
         stamp_strings=stamp_s,
     )
+
+
+def _interpolate_in_file_order(
+    t: NDArray[np.float64], prev: NDArray[np.int64], odom_t: NDArray[np.float64], odom_p: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Odometry ``(N, 3)`` at scan stamps ``t`` between the ODOM lines ``prev`` and ``prev + 1`` of the file."""
+    n = len(odom_t)
+    i0 = np.clip(prev, 0, n - 1)
+    i1 = np.clip(prev + 1, 0, n - 1)
+    dt = odom_t[i1] - odom_t[i0]
+    f = np.where(dt > 0, (t - odom_t[i0]) / np.where(dt > 0, dt, 1.0), 0.0)
+    f = np.where(prev < 0, 1.0, np.clip(f, 0.0, 1.0))
+    p0, p1 = odom_p[i0], odom_p[i1]
+    xy = p0[:, :2] + f[:, None] * (p1[:, :2] - p0[:, :2])
+    yaw = wrap_angle(p0[:, 2] + f * wrap_angle(p1[:, 2] - p0[:, 2]))
+    return np.concatenate([xy, np.asarray(yaw).reshape(-1, 1)], axis=1)

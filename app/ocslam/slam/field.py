@@ -79,6 +79,7 @@ def build_field(
     if len(pts) == 0:
         return None
     res = float(resolution)
+    margin_m = max(float(margin_m), 2.0 * res)
     lo = np.floor((pts.min(axis=0) - margin_m) / res) * res
     hi = pts.max(axis=0) + margin_m
     W = int(np.ceil((hi[0] - lo[0]) / res)) + 2
@@ -88,24 +89,21 @@ def build_field(
     row = u[:, 1].astype(np.int64)
     flat = row * W + col
     n = H * W
-    cnt = np.bincount(flat, minlength=n).astype(np.float64)
-    occ = cnt > 0
-    # moments per cell, then 3×3 neighbourhood sums (local coordinates relative to `lo` keep precision)
+    # per occupied cell: count and moments (coordinates relative to `lo` keep precision)
+    cells, inv = np.unique(flat, return_inverse=True)
+    P = len(cells)
     x, y = pts[:, 0] - lo[0], pts[:, 1] - lo[1]
-    mom = np.stack(
-        [
-            cnt,
-            np.bincount(flat, x, n),
-            np.bincount(flat, y, n),
-            np.bincount(flat, x * x, n),
-            np.bincount(flat, x * y, n),
-            np.bincount(flat, y * y, n),
-        ],
-        axis=-1,
-    ).reshape(H, W, 6)
-    cells = np.flatnonzero(occ)
-    mean = mom.reshape(n, 6)[cells, 1:3] / cnt[cells, None]
-    nb = cv2.boxFilter(mom, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT).reshape(n, 6)[cells]
+    mom = np.zeros((P + 1, 6))  # row P: an empty cell, for missing neighbours
+    for j, v in enumerate((None, x, y, x * x, x * y, y * y)):
+        mom[:P, j] = np.bincount(inv, v, minlength=P)
+    cnt = mom[:P, 0]
+    mean = mom[:P, 1:3] / cnt[:, None]
+    slot = np.full(n, P, np.int32)
+    slot[cells] = np.arange(P, dtype=np.int32)
+    # 3×3 neighbourhood sums (points are never in the outer two cells, so neighbours stay inside)
+    nb = np.zeros((P, 6))
+    for off in (-W - 1, -W, -W + 1, -1, 0, 1, W - 1, W, W + 1):
+        nb += mom[slot[cells + off]]
     N = nb[:, 0]
     mx, my = nb[:, 1] / N, nb[:, 2] / N
     a = nb[:, 3] / N - mx * mx
@@ -120,7 +118,9 @@ def build_field(
     linearity = np.where(lmax > 1e-12, 1.0 - np.maximum(lmin, 0.0) / np.maximum(lmax, 1e-12), 0.0)
     linearity = np.where(N >= 3, linearity, 0.0)
 
-    mask = np.where(occ.reshape(H, W), 0, 255).astype(np.uint8)
+    mask = np.full(n, 255, np.uint8)
+    mask[cells] = 0
+    mask = mask.reshape(H, W)
     dist, labels = cv2.distanceTransformWithLabels(mask, cv2.DIST_L2, cv2.DIST_MASK_5, labelType=cv2.DIST_LABEL_PIXEL)
     # labels number the zero pixels; map each label to the index of its occupied cell
     lab_of_cell = labels.reshape(-1)[cells]

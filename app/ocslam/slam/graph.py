@@ -67,11 +67,13 @@ def optimize(
     iterations: int = 20,
     fixed: int = 0,
     tol: float = 1e-6,
+    rel_tol: float = 1e-6,
 ) -> OptimizeResult:
     """Optimise ``(K, 3)`` poses given ``(M, 2)`` edges, ``(M, 3)`` measurements, ``(M, 3)`` diagonal information.
 
     ``robust`` ``(M,)`` selects the edges with a Cauchy kernel of scale ``robust_scale`` (in units of
-    the whitened error). Node ``fixed`` does not move.
+    the whitened error). Node ``fixed`` does not move. Stops after ``iterations``, when the largest update
+    is below ``tol`` or when the cost decreases by less than ``rel_tol`` (relative).
     """
     x = np.array(poses, np.float64, copy=True)
     K = len(x)
@@ -157,6 +159,6 @@ def optimize(
                 improved = True
                 break
             lam *= 10.0
-        if not improved or step < tol or rel < 1e-9:
+        if not improved or step < tol or rel < rel_tol:
             break
     return OptimizeResult(x, it, cost0, cost, w)

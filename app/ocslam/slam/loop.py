@@ -5,7 +5,10 @@ of overlap). A finished submap's :class:`~app.ocslam.slam.field.MatchField` is b
 of its first keyframe (its *anchor*), and cached; it is rebuilt only if an optimisation changed the
 relative poses of its keyframes. For a new keyframe ``k``, the submaps that have a keyframe within
 ``loop_search_radius_m`` of ``k`` (and are old enough not to be part of the local map) are searched with
-branch and bound over a ``±loop_window_xy_m × ±loop_window_yaw_rad`` window. The query is the keyframe's
+branch and bound over a window of ``±loop_window_xy_m × ±loop_window_yaw_rad`` that grows by
+``loop_window_growth`` per metre travelled since the last accepted closure (up to
+``loop_window_max_xy_m``/``loop_window_max_yaw_rad``), as the drift it must absorb does; the candidate
+radius grows with it. The query is the keyframe's
 local cloud (its scan and its predecessors', voxel-downsampled), which is more distinctive than one scan.
 
 Acceptance (strict): the discrete score must reach ``loop_min_score``, the continuous refinement must
@@ -64,6 +67,17 @@ class LoopCloser:
         self.submaps: dict[int, _Submap] = {}
         self.searches = 0
         self.accepted = 0
+        self.travel_since_loop = 0.0  # m travelled since the last accepted loop closure
+        self.log: list[tuple] = []
+
+    def window(self) -> tuple[float, float]:
+        """Search window half-sizes ``(xy m, yaw rad)``: they grow with the distance travelled since the
+        last accepted loop closure, as the drift they must absorb does."""
+        cfg = self.cfg
+        t = self.travel_since_loop
+        xy = min(cfg.loop_window_xy_m + cfg.loop_window_growth * t, max(cfg.loop_window_max_xy_m, cfg.loop_window_xy_m))
+        yaw = min(cfg.loop_window_yaw_rad + cfg.loop_window_growth * t / 5.0, max(cfg.loop_window_max_yaw_rad, cfg.loop_window_yaw_rad))
+        return xy, yaw
 
     def _submap_range(self, s: int) -> tuple[int, int]:
         S = self.cfg.submap_keyframes
@@ -84,7 +98,7 @@ class LoopCloser:
             np.vstack(pts) if pts else np.zeros((0, 2)),
             self.cfg.match_resolution_m,
             self.cfg.match_sigma_m,
-            margin_m=self.cfg.loop_window_xy_m + 0.5,
+            margin_m=0.5,
         )
         sm = _Submap(first, last, rel, fld)
         self.submaps[s] = sm
@@ -97,14 +111,15 @@ class LoopCloser:
         first = max(0, k - n + 1)
         rel = between(poses[k], poses[first : k + 1])
         pts = np.vstack([transform_points(rel[i], kfs.scans[first + i].points) for i in range(k + 1 - first)])
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.cfg.loop_query_range_m]
         pts = voxel_downsample(pts, 2.0 * self.cfg.match_resolution_m)
         if len(pts) > self.cfg.loop_query_max_points:
             sel = np.linspace(0, len(pts) - 1, self.cfg.loop_query_max_points).astype(np.int64)
             pts = pts[sel]
         return pts
 
-    def candidates(self, kfs: Keyframes, k: int) -> list[int]:
-        """Submap ids worth searching for keyframe ``k``, nearest first."""
+    def candidates(self, kfs: Keyframes, k: int, radius: float) -> list[int]:
+        """Submap ids with a keyframe within ``radius`` of keyframe ``k``, nearest first."""
         cfg = self.cfg
         S = cfg.submap_keyframes
         # a submap is eligible once it is complete and older than the local map window
@@ -119,14 +134,18 @@ class LoopCloser:
         sid = np.minimum(sid, n_sub - 1)
         best = np.full(n_sub, np.inf)
         np.minimum.at(best, sid, d)
-        ids = np.flatnonzero(best < cfg.loop_search_radius_m)
+        ids = np.flatnonzero(best < radius)
         ids = ids[np.argsort(best[ids])]
         return [int(s) for s in ids[: cfg.loop_max_candidates]]
 
     def search(self, kfs: Keyframes, k: int) -> list[LoopClosure]:
         """Try to close loops from keyframe ``k``; returns the accepted closures."""
         cfg = self.cfg
-        cands = self.candidates(kfs, k)
+        if k > 0:
+            p = kfs.poses.data
+            self.travel_since_loop += float(np.hypot(*(p[k, :2] - p[k - 1, :2])))
+        win_xy, win_yaw = self.window()
+        cands = self.candidates(kfs, k, cfg.loop_search_radius_m + win_xy - cfg.loop_window_xy_m)
         if not cands:
             return []
         query = self.query_cloud(kfs, k)
@@ -141,15 +160,21 @@ class LoopCloser:
             self.searches += 1
             center = between(poses[sm.first], poses[k])
             res = correlative_search(
-                sm.field, query, center, cfg.loop_window_xy_m, cfg.loop_window_yaw_rad, cfg.match_yaw_step_rad, cfg.loop_min_score
+                sm.field, query, center, win_xy, win_yaw, cfg.match_yaw_step_rad, cfg.loop_min_score
             )
             if res is None:
                 continue
             ref = refine(sm.field, query, res.pose, max_dist_m=2.0 * cfg.match_resolution_m, robust_m=cfg.match_robust_m)
             moved = np.hypot(*(ref.pose[:2] - res.pose[:2]))
+            ev = np.linalg.eigvalsh(ref.hessian[:2, :2])
+            constraint = float(ev[0] / ev[1]) if ev[1] > 0 else 0.0
+            self.log.append((k, s, res.score, ref.inlier_fraction, float(moved), constraint))
             if ref.inlier_fraction < cfg.loop_min_inliers or moved > 2.0 * cfg.match_resolution_m:
                 continue
+            if constraint < cfg.loop_min_constraint:
+                continue
             self.accepted += 1
+            self.travel_since_loop = 0.0
             out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction))
         return out
 

@@ -51,10 +51,15 @@ def _rotated_cells(fld: MatchField, pts: NDArray[np.float64], xy: NDArray[np.flo
 
 
 def _scores(grid: NDArray[np.float32], rows, cols, a, ox, oy) -> NDArray[np.float64]:
+    """Mean of ``grid`` over the points of each candidate ``(a, ox, oy)`` (out-of-grid cells: the zero border)."""
     H, W = grid.shape
-    r = np.clip(rows[a] + oy[:, None], 0, H - 1)
-    c = np.clip(cols[a] + ox[:, None], 0, W - 1)
-    return grid[r, c].mean(axis=1, dtype=np.float64)
+    r = rows[a] + oy[:, None].astype(np.int32)
+    c = cols[a] + ox[:, None].astype(np.int32)
+    np.minimum(np.maximum(r, 0, out=r), H - 1, out=r)
+    np.minimum(np.maximum(c, 0, out=c), W - 1, out=c)
+    r *= W
+    r += c
+    return grid.reshape(-1)[r].mean(axis=1, dtype=np.float64)
 
 
 def correlative_search(
@@ -140,6 +145,22 @@ def score_pose(fld: MatchField, pts: NDArray[np.float64], pose: NDArray[np.float
     return float(_scores(fld.score, rows, cols, np.zeros(1, int), np.zeros(1, int), np.zeros(1, int))[0])
 
 
+def _associate(fld: MatchField, pts: NDArray[np.float64], x: NDArray[np.float64], max_d2: float):
+    """Points ``q`` (N, 2) at pose ``x``, nearest map point index ``k`` (N,), ``e = q − p_k`` (N, 2), valid mask."""
+    c, s = math.cos(x[2]), math.sin(x[2])
+    q = pts @ np.array([[c, s], [-s, c]]) + x[:2]
+    H, W = fld.shape
+    u = ((q - fld.origin_xy) * (1.0 / fld.resolution)).astype(np.int64)
+    col = np.minimum(np.maximum(u[:, 0], 0), W - 1)
+    row = np.minimum(np.maximum(u[:, 1], 0), H - 1)
+    k = fld.nearest.reshape(-1)[row * W + col]
+    ok = k >= 0
+    k = np.where(ok, k, 0)
+    e = q - fld.points[k]
+    ok &= np.einsum("ij,ij->i", e, e) < max_d2
+    return q, k, e, ok
+
+
 def refine(
     fld: MatchField,
     pts: NDArray[np.float64],
@@ -163,78 +184,63 @@ def refine(
     """
     pts = np.asarray(pts, np.float64).reshape(-1, 2)
     x = np.asarray(init, np.float64).copy()
-    H, W = fld.shape
-    px, py = pts[:, 0], pts[:, 1]
     Hs = np.zeros((3, 3))
     it = 0
+    if prior is not None and prior_info is not None:
+        prior = np.asarray(prior, np.float64)
+        prior_info = np.asarray(prior_info, np.float64)
+    md2 = max_dist_m * max_dist_m
+    r2 = robust_m * robust_m
     for it in range(1, iterations + 1):
-        c, s = math.cos(x[2]), math.sin(x[2])
-        qx = c * px - s * py + x[0]
-        qy = s * px + c * py + x[1]
-        col = np.clip(((qx - fld.origin_xy[0]) / fld.resolution).astype(np.int64), 0, W - 1)
-        row = np.clip(((qy - fld.origin_xy[1]) / fld.resolution).astype(np.int64), 0, H - 1)
-        k = fld.nearest[row, col]
-        ok = k >= 0
-        k = np.where(ok, k, 0)
-        ex = qx - fld.points[k, 0]
-        ey = qy - fld.points[k, 1]
-        ok &= ex * ex + ey * ey < max_dist_m * max_dist_m
-        if ok.sum() < 3:
+        q, k, e, ok = _associate(fld, pts, x, md2)
+        sel = np.flatnonzero(ok)
+        if len(sel) < 3:
             break
-        nx, ny = fld.normals[k[ok], 0], fld.normals[k[ok], 1]
-        lam = point_weight * (1.0 - fld.linearity[k[ok]]) + 1e-3
-        ex, ey = ex[ok], ey[ok]
-        dqx = -s * px[ok] - c * py[ok]  # d q / d yaw
-        dqy = c * px[ok] - s * py[ok]
-        # Ω = n nᵀ + λ I ; cost eᵀ Ω e
-        en = nx * ex + ny * ey
-        rho2 = en * en + lam * (ex * ex + ey * ey)
-        wgt = 1.0 / (1.0 + rho2 / (robust_m * robust_m))
-        # J = [[1, 0, dqx], [0, 1, dqy]]; JᵀΩJ and JᵀΩe, written out
-        Oxx = nx * nx + lam
-        Oxy = nx * ny
-        Oyy = ny * ny + lam
-        # Ω J columns
-        a0x, a0y = Oxx, Oxy  # Ω [1,0]
-        a1x, a1y = Oxy, Oyy  # Ω [0,1]
-        a2x, a2y = Oxx * dqx + Oxy * dqy, Oxy * dqx + Oyy * dqy
-        Hs = np.empty((3, 3))
-        Hs[0, 0] = np.sum(wgt * a0x)
-        Hs[0, 1] = Hs[1, 0] = np.sum(wgt * a0y)
-        Hs[1, 1] = np.sum(wgt * a1y)
-        Hs[0, 2] = Hs[2, 0] = np.sum(wgt * a2x)
-        Hs[1, 2] = Hs[2, 1] = np.sum(wgt * a2y)
-        Hs[2, 2] = np.sum(wgt * (dqx * a2x + dqy * a2y))
-        Oex, Oey = Oxx * ex + Oxy * ey, Oxy * ex + Oyy * ey
-        g = np.array([np.sum(wgt * Oex), np.sum(wgt * Oey), np.sum(wgt * (dqx * Oex + dqy * Oey))])
+        ks, es = k[sel], e[sel]
+        n = fld.normals[ks]
+        lam = point_weight * (1.0 - fld.linearity[ks]) + 1e-3
+        c, s_ = math.cos(x[2]), math.sin(x[2])
+        p = pts[sel]
+        dq = np.stack([-s_ * p[:, 0] - c * p[:, 1], c * p[:, 0] - s_ * p[:, 1]], axis=1)  # d q / d yaw
+        en = np.einsum("ij,ij->i", n, es)
+        wgt = 1.0 / (1.0 + (en * en + lam * np.einsum("ij,ij->i", es, es)) / r2)  # Cauchy
+        # rows: point-to-line (n·e) and sqrt(λ)·e (point-to-point), stacked as (3m, 3) Jacobian
+        sl = np.sqrt(lam)
+        m = len(sel)
+        J = np.empty((3 * m, 3))
+        J[:m, :2] = n
+        J[:m, 2] = np.einsum("ij,ij->i", n, dq)
+        J[m : 2 * m, 0] = sl
+        J[m : 2 * m, 1] = 0.0
+        J[m : 2 * m, 2] = sl * dq[:, 0]
+        J[2 * m :, 0] = 0.0
+        J[2 * m :, 1] = sl
+        J[2 * m :, 2] = sl * dq[:, 1]
+        r = np.concatenate([en, sl * es[:, 0], sl * es[:, 1]])
+        w3 = np.tile(wgt, 3)
+        Jw = J * w3[:, None]
+        Hs = Jw.T @ J
+        g = Jw.T @ r
         Ht = Hs.copy()
         if prior is not None and prior_info is not None:
             d = x - prior
-            d[2] = wrap_angle(d[2])
-            Ht[np.diag_indices(3)] += prior_info
+            d[2] = (d[2] + math.pi) % (2 * math.pi) - math.pi
+            Ht[0, 0] += prior_info[0]
+            Ht[1, 1] += prior_info[1]
+            Ht[2, 2] += prior_info[2]
             g = g + prior_info * d
         try:
             dx = -np.linalg.solve(Ht + 1e-9 * np.eye(3), g)
         except np.linalg.LinAlgError:
             break
         x += dx
-        x[2] = wrap_angle(x[2])
-        if abs(dx[0]) < 1e-5 and abs(dx[1]) < 1e-5 and abs(dx[2]) < 1e-5:
+        x[2] = (x[2] + math.pi) % (2 * math.pi) - math.pi
+        if abs(dx[0]) < 1e-4 and abs(dx[1]) < 1e-4 and abs(dx[2]) < 1e-4:
             break
     # final statistics at x
-    c, s = math.cos(x[2]), math.sin(x[2])
-    qx = c * px - s * py + x[0]
-    qy = s * px + c * py + x[1]
-    col = np.clip(((qx - fld.origin_xy[0]) / fld.resolution).astype(np.int64), 0, W - 1)
-    row = np.clip(((qy - fld.origin_xy[1]) / fld.resolution).astype(np.int64), 0, H - 1)
-    k = fld.nearest[row, col]
-    ok = k >= 0
-    k = np.where(ok, k, 0)
-    ex = qx - fld.points[k, 0]
-    ey = qy - fld.points[k, 1]
-    en = np.abs(fld.normals[k, 0] * ex + fld.normals[k, 1] * ey)
-    d2 = ex * ex + ey * ey
-    inl = ok & (d2 < max_dist_m * max_dist_m) & (en < inlier_m)
+    q, k, e, ok = _associate(fld, pts, x, md2)
+    en = np.abs(np.einsum("ij,ij->i", fld.normals[k], e))
+    inl = ok & (en < inlier_m)
     frac = float(inl.sum()) / max(len(pts), 1)
     rms = float(np.sqrt(np.mean(en[inl] ** 2))) if inl.any() else float("inf")
     return RefineResult(pose=x, inlier_fraction=frac, rms_m=rms, hessian=Hs, iterations=it)

@@ -1,0 +1,112 @@
+"""The Slam facade: bad scans are skipped and counted, the map survives them; save/load continues mapping."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from app.ocslam.config import SlamConfig
+from app.ocslam.messages import LaserScan
+from app.ocslam.se2 import Pose2
+from app.ocslam.slam import Slam
+from app.ocslam.slam.synthetic import room_world, simulate_scan
+
+SEGS = room_world()
+
+
+def _drive(slam, n, t0=0.0, start=(2.0, 2.0, 0.0), rng=None):
+    rng = rng or np.random.default_rng(0)
+    truth = []
+    for i in range(n):
+        p = Pose2(start[0] + 0.04 * i, start[1] + 0.01 * i, start[2] + 0.01 * i)
+        truth.append(p.as_array())
+        slam.process(simulate_scan(p, SEGS, stamp=t0 + 0.2 * i, noise_std=0.005, rng=rng), p)
+    return np.array(truth)
+
+
+def _bad(scan: LaserScan, **kw) -> LaserScan:
+    return dataclasses.replace(scan, **kw)
+
+
+def test_bad_scans_are_skipped_and_counted():
+    slam = Slam(SlamConfig())
+    _drive(slam, 30)
+    grid0 = slam.occupancy_grid()
+    n0 = len(slam.trajectory()[0])
+    kf0 = len(slam.keyframes)
+    good = simulate_scan(Pose2(3.2, 2.3, 0.3), SEGS, stamp=100.0)
+    r = good.ranges.copy()
+    nan = r.copy()
+    nan[5] = np.nan
+    neg = r.copy()
+    neg[7] = -1.0
+    odo = Pose2(3.2, 2.3, 0.3)
+    assert not slam.process(_bad(good, ranges=nan), odo)
+    assert not slam.process(_bad(good, ranges=neg), odo)
+    assert not slam.process(_bad(good, ranges=np.zeros(0)), odo)
+    assert not slam.process(_bad(good, ranges=r[:100]), odo)
+    assert not slam.process(_bad(good, stamp=float("nan")), odo)
+    assert not slam.process(_bad(good, stamp=1.0), odo)  # older than the last processed scan
+    assert not slam.process(good, Pose2(float("inf"), 0.0, 0.0))
+    assert not slam.process(_bad(good, ranges=np.full_like(r, np.inf)), odo)  # nothing in range
+    assert dict(slam.skipped) == {
+        "nan_range": 1,
+        "negative_range": 1,
+        "empty": 1,
+        "wrong_length": 1,
+        "nonfinite_stamp": 1,
+        "stamp_not_increasing": 1,
+        "nonfinite_odometry": 1,
+        "too_few_returns": 1,
+    }
+    # only the all-inf scan (a valid scan with no returns) extends the trajectory, on odometry
+    assert len(slam.trajectory()[0]) == n0 + 1
+    assert len(slam.keyframes) == kf0
+    grid1 = slam.occupancy_grid()
+    assert np.array_equal(grid0.data, grid1.data)
+    # and mapping goes on afterwards
+    _drive(slam, 10, t0=200.0, start=(3.3, 2.3, 0.3))
+    assert len(slam.keyframes) > kf0
+    assert np.isfinite(slam.trajectory()[1]).all()
+
+
+def test_tracking_on_exact_odometry_and_outputs():
+    slam = Slam(SlamConfig())
+    truth = _drive(slam, 40)
+    st, est = slam.trajectory()
+    assert len(st) == 40
+    assert np.abs(est[:, :2] - truth[:, :2]).max() < 0.03
+    g = slam.pose_graph()
+    assert g.nodes.shape[1] == 3 and len(g.stamps) == len(g.nodes)
+    assert g.edges.shape == (len(g.nodes) - 1, 2) and not g.is_loop.any()
+    k = slam.keyframe_at(st[-1])
+    assert k == len(g.nodes) - 1 or k == len(g.nodes) - 2
+    assert np.allclose(slam.keyframe_pose(0).as_array(), g.nodes[0])
+    grid = slam.occupancy_grid()
+    assert grid.frame_id == "map" and (grid.data == 100).sum() + (grid.data > 65).sum() > 50
+
+
+def test_state_dict_round_trip_continues_mapping():
+    cfg = SlamConfig()
+    a = Slam(cfg, Pose2(0.05, 0.0, 0.0))
+    _drive(a, 25)
+    d = a.state_dict()
+    assert all(isinstance(v, (np.ndarray, int, float, str, dict, list)) for v in d.values())
+    b = Slam.from_state_dict(cfg, d)
+    assert np.array_equal(a.trajectory()[1], b.trajectory()[1])
+    assert np.array_equal(a.pose_graph().edges, b.pose_graph().edges)
+    assert b.T_base_scan == a.T_base_scan
+    assert np.array_equal(a.occupancy_grid().data, b.occupancy_grid().data)
+    # both continue identically
+    rng1, rng2 = np.random.default_rng(5), np.random.default_rng(5)
+    _drive(a, 10, t0=50.0, start=(3.0, 2.25, 0.25), rng=rng1)
+    _drive(b, 10, t0=50.0, start=(3.0, 2.25, 0.25), rng=rng2)
+    assert np.allclose(a.trajectory()[1], b.trajectory()[1])
+
+
+def test_disabled_slam_follows_odometry():
+    slam = Slam(SlamConfig(enabled=False))
+    truth = _drive(slam, 5)
+    assert np.allclose(slam.trajectory()[1], truth)
+    assert np.allclose(slam.T_map_odom.as_array(), 0.0, atol=1e-12)

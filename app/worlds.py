@@ -767,8 +767,10 @@ def _shared_edge(a: _Room, b: _Room) -> tuple[str, float, float, float] | None:
     return None
 
 
-def _grid_path(free: NDArray[np.bool_], a: tuple[int, int], b: tuple[int, int]) -> list[tuple[int, int]] | None:
-    """8-connected A* on a boolean grid (row, col)."""
+def _grid_path(
+    free: NDArray[np.bool_], a: tuple[int, int], b: tuple[int, int], cost: NDArray[np.float64] | None = None
+) -> list[tuple[int, int]] | None:
+    """8-connected A* on a boolean grid (row, col); ``cost`` (≥ 1) multiplies the step length."""
     H, W = free.shape
     if not (free[a] and free[b]):
         return None
@@ -784,12 +786,12 @@ def _grid_path(free: NDArray[np.bool_], a: tuple[int, int], b: tuple[int, int]) 
                 cur = came[cur]
                 path.append(cur)
             return path[::-1]
-        for dr, dc, cost in steps:
+        for dr, dc, step in steps:
             nr, nc = cur[0] + dr, cur[1] + dc
             if 0 <= nr < H and 0 <= nc < W and free[nr, nc]:
                 if dr and dc and not (free[cur[0] + dr, cur[1]] and free[cur[0], cur[1] + dc]):
                     continue
-                ng = g[cur] + cost
+                ng = g[cur] + step * (1.0 if cost is None else float(cost[nr, nc]))
                 if ng < g.get((nr, nc), 1e18):
                     g[(nr, nc)] = ng
                     came[(nr, nc)] = cur
@@ -799,20 +801,23 @@ def _grid_path(free: NDArray[np.bool_], a: tuple[int, int], b: tuple[int, int]) 
 
 
 class _Planner:
-    """Grid planner over the world's blocking geometry inflated by the robot radius and a margin."""
+    """Grid planner over the world's blocking geometry: cells within ``clearance`` of anything are
+    forbidden, cells within ``preferred`` cost more, so routes keep well away from obstacles where the
+    space allows and squeeze through doorways where it does not."""
 
-    def __init__(self, world: World, clearance: float, res: float = 0.05) -> None:
+    def __init__(self, world: World, clearance: float, preferred: float = 0.35, res: float = 0.05) -> None:
         xmin, ymin, xmax, ymax = world.bounds()
         self.res, self.x0, self.y0 = res, xmin, ymin
         self.W = int(math.ceil((xmax - xmin) / res)) + 1
         self.H = int(math.ceil((ymax - ymin) / res)) + 1
         self.blocking = unary_union([g for _, g in world.blocking_geometry()])
-        self.clearance = clearance
+        self.clearance, self.preferred = clearance, preferred
         jj, ii = np.meshgrid(np.arange(self.W), np.arange(self.H))
         pts = np.c_[xmin + (jj.ravel() + 0.5) * res, ymin + (ii.ravel() + 0.5) * res]
-        dist = shapely.distance(self.blocking, shapely.points(pts)).reshape(self.H, self.W)
-        # a margin of one cell so straight lines between cell centres keep the clearance
-        self.free = dist >= clearance + res * 0.75
+        self.dist = shapely.distance(self.blocking, shapely.points(pts)).reshape(self.H, self.W)
+        # a margin of one cell so straight lines between neighbouring cell centres keep the clearance
+        self.free = self.dist >= clearance + res * 0.75
+        self.cost = np.where(self.dist >= preferred, 1.0, 4.0)
 
     def cell(self, x: float, y: float) -> tuple[int, int]:
         return (int((y - self.y0) / self.res), int((x - self.x0) / self.res))
@@ -821,30 +826,36 @@ class _Planner:
         return (self.x0 + (c[1] + 0.5) * self.res, self.y0 + (c[0] + 0.5) * self.res)
 
     def clear(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        """The segment keeps ``preferred`` clearance, or at least as much as its end points have."""
+        need = min(self.preferred, self.blocking.distance(Point(a)), self.blocking.distance(Point(b)))
+        need = max(need - 0.01, self.clearance + 1e-3)
         seg = LineString([a, b]) if a != b else Point(a)
-        return self.blocking.distance(seg) >= self.clearance + 1e-3
+        return self.blocking.distance(seg) >= need
 
     def nearest_free(self, x: float, y: float, max_r: float = 1.5) -> tuple[int, int] | None:
         r0, c0 = self.cell(x, y)
         k = int(max_r / self.res)
-        best, bd = None, 1e18
-        for r in range(max(0, r0 - k), min(self.H, r0 + k + 1)):
-            for c in range(max(0, c0 - k), min(self.W, c0 + k + 1)):
-                if self.free[r, c]:
-                    d = (r - r0) ** 2 + (c - c0) ** 2
-                    if d < bd:
-                        best, bd = (r, c), d
-        return best
+        rs = slice(max(0, r0 - k), min(self.H, r0 + k + 1))
+        cs = slice(max(0, c0 - k), min(self.W, c0 + k + 1))
+        sub = self.free[rs, cs] & (self.dist[rs, cs] >= min(self.preferred, self.clearance + 0.1))
+        if not sub.any():
+            sub = self.free[rs, cs]
+            if not sub.any():
+                return None
+        ii, jj = np.nonzero(sub)
+        ii, jj = ii + rs.start, jj + cs.start
+        k = int(np.argmin((ii - r0) ** 2 + (jj - c0) ** 2))
+        return (int(ii[k]), int(jj[k]))
 
     def plan(self, a: tuple[float, float], b: tuple[float, float]) -> list[tuple[float, float]] | None:
         ca, cb = self.nearest_free(*a), self.nearest_free(*b)
         if ca is None or cb is None:
             return None
-        cells = _grid_path(self.free, ca, cb)
+        cells = _grid_path(self.free, ca, cb, self.cost)
         if cells is None:
             return None
         pts = [self.point(c) for c in cells]
-        # string pulling: keep the farthest visible point
+        # string pulling: keep the farthest point reachable in a straight, clear line
         out = [pts[0]]
         i = 0
         while i < len(pts) - 1:
@@ -1087,7 +1098,7 @@ def _try_random_world(rng: np.random.Generator, seed: int, n_rooms: int | None, 
     world.obstacles = obstacles
 
     # -- start pose and the tour ---------------------------------------------------------------
-    planner = _Planner(world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02)
+    planner = _Planner(world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35)
     first = rooms[int(rng.integers(len(rooms)))]
     sc = planner.nearest_free(*first.center, max_r=2.0)
     if sc is None:
@@ -1119,19 +1130,23 @@ def _try_random_world(rng: np.random.Generator, seed: int, n_rooms: int | None, 
 
 
 def _room_viewpoints(planner: "_Planner", room: _Room, cur: tuple[float, float]) -> list[tuple[float, float]]:
-    """A loop around the room, ~0.8 m inside its walls (its centre if the room is small), starting
-    at the corner nearest ``cur``: driving it, the camera sweeps the whole room."""
+    """Where to drive in a room so the camera sweeps it: a loop ~0.8 m inside its walls (a line along
+    a narrow room, its centre for a small one), starting nearest ``cur``."""
     inset = 0.8
-    if room.x1 - room.x0 < 2 * inset + 0.6 or room.y1 - room.y0 < 2 * inset + 0.6:
-        cands = [room.center]
-    else:
+    w, h = room.x1 - room.x0, room.y1 - room.y0
+    cx, cy = room.center
+    if w >= 2 * inset + 1.0 and h >= 2 * inset + 1.0:
         cands = [(room.x0 + inset, room.y0 + inset), (room.x1 - inset, room.y0 + inset),
                  (room.x1 - inset, room.y1 - inset), (room.x0 + inset, room.y1 - inset)]
-        k = int(np.argmin([math.hypot(c[0] - cur[0], c[1] - cur[1]) for c in cands]))
-        cands = cands[k:] + cands[:k]
+    elif max(w, h) >= 2 * inset + 1.0:
+        cands = [(room.x0 + inset, cy), (room.x1 - inset, cy)] if w > h else [(cx, room.y0 + inset), (cx, room.y1 - inset)]
+    else:
+        cands = [room.center]
+    k = int(np.argmin([math.hypot(c[0] - cur[0], c[1] - cur[1]) for c in cands]))
+    cands = cands[k:] + cands[:k]
     out = []
     for c in cands:
-        cell = planner.nearest_free(*c, max_r=0.8)
+        cell = planner.nearest_free(*c, max_r=0.6)
         if cell is not None:
             out.append(planner.point(cell))
     return out

@@ -30,32 +30,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 class PurePursuit:
-    """Follows a waypoint polyline: lookahead point, v limited in turns, turn in place when facing away."""
+    """Drives a waypoint polyline segment by segment: turn in place toward the next waypoint, then
+    drive with a proportional heading correction (little corner cutting, so validated routes stay clear)."""
 
-    def __init__(self, waypoints: np.ndarray, *, v: float = 0.2, lookahead: float = 0.35, goal_tol: float = 0.12) -> None:
+    def __init__(self, waypoints: np.ndarray, *, v: float = 0.2, reach: float = 0.1, turn_in_place_rad: float = 0.35) -> None:
         self.path = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
-        self.v, self.lookahead, self.goal_tol = v, lookahead, goal_tol
-        self.i = 0  # index of the segment end we are heading to
-        self.done = False
+        self.v, self.reach, self.turn = v, reach, turn_in_place_rad
+        self.i = 0  # index of the waypoint we are heading to
+        self.done = len(self.path) == 0
 
     def command(self, x: float, y: float, yaw: float) -> tuple[float, float]:
         from app.ocslam.se2 import wrap_angle
 
-        pos = np.array([x, y])
-        while self.i < len(self.path) - 1 and np.linalg.norm(self.path[self.i] - pos) < self.lookahead:
+        while not self.done and float(np.hypot(*(self.path[self.i] - (x, y)))) < self.reach:
             self.i += 1
-        target = self.path[self.i]
-        dist = float(np.linalg.norm(target - pos))
-        if self.i == len(self.path) - 1 and dist < self.goal_tol:
-            self.done = True
+            self.done = self.i >= len(self.path)
+        if self.done:
             return 0.0, 0.0
-        alpha = float(wrap_angle(math.atan2(target[1] - y, target[0] - x) - yaw))
-        if abs(alpha) > math.radians(50):
-            return 0.0, math.copysign(1.2, alpha)
-        L = max(dist, 1e-3)
-        w = 2.0 * self.v * math.sin(alpha) / min(L, self.lookahead * 1.5)
-        v = self.v * max(0.3, math.cos(alpha))
-        return v, max(-1.5, min(1.5, w))
+        tx, ty = self.path[self.i]
+        alpha = float(wrap_angle(math.atan2(ty - y, tx - x) - yaw))
+        if abs(alpha) > self.turn:
+            return 0.0, math.copysign(1.5, alpha)
+        dist = float(np.hypot(tx - x, ty - y))
+        return min(self.v, 0.6 * dist + 0.05), max(-1.5, min(1.5, 3.0 * alpha))
 
 
 def tour(cfg, world, route: str, *, camera: bool, max_duration: float) -> dict:

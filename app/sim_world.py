@@ -487,8 +487,14 @@ class SimWorld:
         fov_y = math.degrees(2.0 * math.atan((height / 2.0) / info.K[1, 1]))
         near, far = float(cc.near_m), float(cc.far_m)
         proj = p.computeProjectionMatrixFOV(fov_y, width / height, near, far, physicsClientId=cid)
+        try:
+            light_dir = [float(v) for v in self.config.sim.light_direction]
+            if len(light_dir) != 3 or not all(math.isfinite(v) for v in light_dir):
+                raise ValueError
+        except (TypeError, ValueError):
+            light_dir = [0.3, -0.4, 1.0]  # a malformed sim.light_direction must not stop the camera
         kw: dict[str, Any] = dict(
-            lightDirection=list(self.config.sim.light_direction),
+            lightDirection=light_dir,
             lightAmbientCoeff=float(self.config.sim.light_ambient),
             lightDiffuseCoeff=float(self.config.sim.light_diffuse),
             shadow=0,

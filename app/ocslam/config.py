@@ -156,7 +156,10 @@ class SlamConfig:
     match_yaw_step_rad: float = param(0.0175, min=0.001, max=0.2, unit="rad", help="correlative search yaw step")
     match_min_score: float = param(0.25, min=0.0, max=1.0, help="below this the scan keeps the odometry prediction")
     match_direct_min_inliers: float = param(
-        0.7, min=0.0, max=1.0, help="refinement from the prediction is kept if this fraction of points fits the map"
+        1.0, min=0.0, max=1.0, help="<1: skip the correlative search if a refinement from the prediction fits this well"
+    )
+    match_point_weight: float = param(
+        0.1, min=0.0, max=10.0, help="point-to-point weight where the map has no clean line (corners, sparse points)"
     )
     match_robust_m: float = param(0.03, min=0.001, max=1.0, unit="m", help="Cauchy scale of the refinement")
     prior_sigma_xy_m: float = param(0.1, min=0.001, max=10.0, unit="m", help="odometry prior σ per scan (xy)")
@@ -189,7 +192,8 @@ class SlamConfig:
     loop_min_gap_keyframes: int = param(10, min=0, max=100000, help="extra keyframes between the local map and loop submaps")
     loop_max_candidates: int = param(3, min=1, max=100, help="submaps searched per keyframe")
     optimize_every_keyframes: int = param(10, min=1, max=1000, help="optimise at most this often while loops arrive")
-    map_update_budget: int = param(200, min=1, max=100000, help="keyframes re-inserted into the grid per map update")
+    optimize_iterations: int = param(5, min=1, max=100, help="Levenberg–Marquardt iterations per online optimisation")
+    map_update_budget: int = param(50, min=1, max=100000, help="keyframes re-inserted into the grid per map update")
     map_hz: float = param(1.0, min=0.1, max=10.0, help="map rebuild / publish rate (live app)")
 
 

@@ -164,7 +164,14 @@ class LoopCloser:
             )
             if res is None:
                 continue
-            ref = refine(sm.field, query, res.pose, max_dist_m=2.0 * cfg.match_resolution_m, robust_m=cfg.match_robust_m)
+            ref = refine(
+                sm.field,
+                query,
+                res.pose,
+                max_dist_m=2.0 * cfg.match_resolution_m,
+                robust_m=cfg.match_robust_m,
+                point_weight=cfg.match_point_weight,
+            )
             moved = np.hypot(*(ref.pose[:2] - res.pose[:2]))
             ev = np.linalg.eigvalsh(ref.hessian[:2, :2])
             constraint = float(ev[0] / ev[1]) if ev[1] > 0 else 0.0

@@ -155,29 +155,40 @@ class Slam:
     def _match(self, pts: NDArray[np.float64], pred: NDArray[np.float64]) -> NDArray[np.float64]:
         """Scan-to-local-map pose ``T_map_base`` of ``pts`` (base frame) near the prediction ``pred``.
 
-        First a Gauss–Newton refinement straight from the prediction; if it leaves fewer than
-        ``match_direct_min_inliers`` of the points on the map's surfaces, the branch-and-bound search
-        over the full window runs and the refinement restarts from its optimum.
+        Branch-and-bound search over the window around the prediction, then Gauss–Newton refinement from
+        its optimum. With ``match_direct_min_inliers < 1`` a refinement straight from the prediction is
+        tried first and kept when that fraction of the points fits the map's surfaces (cheaper, but it
+        can settle in a local minimum when the predicted heading is off by a degree or more).
         """
         cfg = self.cfg
         fld = self._local_field()
         if fld is None:
             return pred
         prior_info = np.array([1 / cfg.prior_sigma_xy_m**2, 1 / cfg.prior_sigma_xy_m**2, 1 / cfg.prior_sigma_yaw_rad**2])
-        kw = dict(prior=pred, prior_info=prior_info, max_dist_m=4 * cfg.match_resolution_m, robust_m=cfg.match_robust_m)
-        direct = refine(fld, pts, pred, **kw)
-        if direct.inlier_fraction >= cfg.match_direct_min_inliers:
-            self.stats["match_direct"] += 1
-            return direct.pose
+        kw = dict(
+            prior=pred,
+            prior_info=prior_info,
+            max_dist_m=4 * cfg.match_resolution_m,
+            robust_m=cfg.match_robust_m,
+            point_weight=cfg.match_point_weight,
+        )
+        direct = None
+        if cfg.match_direct_min_inliers < 1.0:
+            direct = refine(fld, pts, pred, **kw)
+            if direct.inlier_fraction >= cfg.match_direct_min_inliers:
+                self.stats["match_direct"] += 1
+                return direct.pose
         res = correlative_search(
             fld, pts, pred, cfg.match_search_xy_m, cfg.match_search_yaw_rad, cfg.match_yaw_step_rad, cfg.match_min_score
         )
         if res is None:
             self.stats["match_failed"] += 1
-            return direct.pose if direct.inlier_fraction > 0 else pred
+            return direct.pose if direct is not None and direct.inlier_fraction > 0 else pred
         ref = refine(fld, pts, res.pose, **kw)
         self.stats["match_searched"] += 1
-        return ref.pose if ref.inlier_fraction >= direct.inlier_fraction else direct.pose
+        if direct is not None and direct.inlier_fraction > ref.inlier_fraction:
+            return direct.pose
+        return ref.pose
 
     def _local_field(self) -> MatchField | None:
         nk = len(self.keyframes)
@@ -234,8 +245,9 @@ class Slam:
         if self._pending_loops and self._kf_since_opt >= cfg.optimize_every_keyframes:
             self.optimize()
 
-    def optimize(self, iterations: int = 5) -> bool:
-        """Optimise the pose graph now. Returns True if keyframes moved."""
+    def optimize(self, iterations: int | None = None) -> bool:
+        """Optimise the pose graph now (``optimize_iterations`` by default). Returns True if keyframes moved."""
+        iterations = self.cfg.optimize_iterations if iterations is None else iterations
         self._pending_loops = 0
         self._kf_since_opt = 0
         if len(self.keyframes) < 2 or len(self.edges_ij) == 0:

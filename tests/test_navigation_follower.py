@@ -213,3 +213,20 @@ def test_route_follower_skips_a_blocked_waypoint_after_the_timeout() -> None:
     # it never touched the box: centre-to-surface distance above the footprint radius
     xy = np.array([[p.x, p.y] for p in poses])
     assert np.linalg.norm(xy[:, None] - box[None], axis=2).min() > ROBOT.footprint_radius_m
+
+
+def test_backs_off_when_blocked_too_close() -> None:
+    """Blocked with a wall 12 cm ahead (inside the footprint radius + 4 cm): back off slowly, unless
+    something is right behind too; with the wall 20 cm ahead just stop."""
+    f = PathFollower(ROBOT)
+    f.set_path([[0.0, 0.0], [2.0, 0.0]])
+    wall_at = lambda x: np.stack([np.full(61, x), np.linspace(-0.3, 0.3, 61)], 1)  # noqa: E731
+    cmd = f.compute(Pose2(), scan_of_points(wall_at(0.12)), Pose2())
+    assert f.status == "blocked" and cmd.linear_x < 0 and cmd.angular_z == 0
+    cmd = f.compute(Pose2(), scan_of_points(np.vstack([wall_at(0.12), wall_at(-0.13)])), Pose2())
+    assert f.status == "blocked" and cmd == Twist()
+    cmd = f.compute(Pose2(), scan_of_points(wall_at(0.2)), Pose2())
+    assert f.status == "blocked" and cmd == Twist()
+    f2 = PathFollower(ROBOT, back_off_mps=0.0)
+    f2.set_path([[0.0, 0.0], [2.0, 0.0]])
+    assert f2.compute(Pose2(), scan_of_points(wall_at(0.12)), Pose2()) == Twist()

@@ -6,21 +6,26 @@
 
 Safety stop (the scan's valid returns, mapped through ``T_base_scan`` and ``T_map_base``):
 
-* *path check*: a disk of ``path_check_radius_m`` swept along the path over the next ``stop_distance_m``
-  must not come closer to a scan point than the robot is now. If it would, the status is ``"blocked"``
-  and the twist zero (until the obstacle leaves or the caller replans); within a further
+* *path check*: the robot's centre, moved along the path over the next ``stop_distance_m``, must not
+  come closer to a scan point than both ``path_check_radius_m`` and its current clearance
+  (:func:`first_conflict`). If it would, the status is ``"blocked"`` and the twist zero (until the
+  obstacle leaves or the caller replans); within a further
   ``obstacle_slowdown_m`` the speed is reduced. This catches obstacles *on* the path that the map does
   not hold yet; clearance from mapped obstacles is the planner's job (its inflation is measured between
   cell centres, so LIDAR returns on an obstacle's surface may lie up to about half a cell closer than
   the robot's radius: the check radius defaults to ``0.75 × radius`` so that valid paths through tight
-  gaps are not refused). Points already that close (a robot squeezed next to a wall) do not block a
-  path that leads away from them.
+  gaps are not refused). A robot already that close to something (squeezed next to a wall) may move
+  as long as it gets no closer.
 * *arc check*: the same test with the full footprint radius along the arc pure pursuit is about to
   drive (it cuts corners); if that arc is not clear the robot turns in place towards the path first.
 * *bumper box*: a point right in front of the body (``0 < x <= radius + emergency_distance``,
   ``|y| <= bumper_half_width``, default ``0.85 × radius``, about the Burger's real half-width) forbids
   driving forward (pure pursuit cuts corners a little); the robot turns in place towards the path if
   that direction is free, else reports ``"blocked"``.
+
+While blocked the twist is zero, except when something in front is closer than ``radius +
+back_off_margin_m`` and the space behind is free: then the robot backs off slowly (``back_off_mps``,
+0 disables it), so that the caller's next plan starts from outside the obstacle's inflation.
 
 Rotating in place is always allowed: the TurtleBot3 Burger is round.
 """
@@ -67,6 +72,31 @@ def corridor_clearance(points_base: NDArray[np.float64], heading: float, half_wi
     return float(along[m].min()) if m.any() else math.inf
 
 
+def first_conflict(
+    points: NDArray[np.float64], samples: NDArray[np.float64], p_now: NDArray[np.float64], radius: float
+) -> int:
+    """Index of the first of ``samples`` (``(K, 2)`` future robot positions) where the robot would be
+    closer to one of ``points`` (``(M, 2)`` obstacle points, same frame) than ``radius`` *and* than its
+    current clearance ``min |points − p_now|`` minus 1 cm; ``-1`` if none.
+
+    The second condition lets a robot that is already closer than ``radius`` to something (squeezed
+    along a wall, leaving a tight spot) move as long as it does not get any closer, while an obstacle
+    on its way still stops it.
+    """
+    if len(points) == 0 or len(samples) == 0:
+        return -1
+    d_now = np.linalg.norm(points - p_now, axis=1)
+    reach = float(np.max(np.linalg.norm(samples - p_now, axis=1))) + radius + 0.05
+    near = d_now <= reach
+    if not near.any():
+        return -1
+    limit = min(radius, float(d_now.min()) - 0.01)
+    pts = points[near]
+    d = np.linalg.norm(pts[:, None, :] - samples[None, :, :], axis=2).min(axis=0)
+    bad = d < limit
+    return int(np.argmax(bad)) if bad.any() else -1
+
+
 class PathFollower:
     """Pure-pursuit follower of a polyline in the ``map`` frame.
 
@@ -94,6 +124,8 @@ class PathFollower:
         slowdown_distance_m: float = 0.5,
         obstacle_slowdown_m: float = 0.3,
         emergency_distance_m: float = 0.05,
+        back_off_mps: float = 0.05,
+        back_off_margin_m: float = 0.04,
         min_linear_mps: float = 0.03,
         min_angular_rps: float = 0.3,
         heading_gain: float = 2.5,
@@ -119,6 +151,8 @@ class PathFollower:
         self.slowdown_distance_m = float(slowdown_distance_m)
         self.obstacle_slowdown_m = float(obstacle_slowdown_m)
         self.emergency_distance_m = float(emergency_distance_m)
+        self.back_off_mps = float(max(0.0, back_off_mps))
+        self.back_off_margin_m = float(back_off_margin_m)
         self.min_linear_mps = float(min(min_linear_mps, self.max_linear_mps))
         self.min_angular_rps = float(min(min_angular_rps, self.max_angular_rps))
         self.heading_gain = float(heading_gain)
@@ -189,24 +223,15 @@ class PathFollower:
 
     def _path_clearance(self, p: NDArray[np.float64], s: float, pts_map: NDArray[np.float64]) -> float:
         """Arc length from the robot's projection ``s`` to the first path sample (every 5 cm up to
-        ``stop_distance + obstacle_slowdown``) where the robot's disk would come within the safety
-        radius of a scan point (``(M, 2)``, map frame) and closer to it than it is now; ``inf`` if none."""
-        if len(pts_map) == 0:
-            return math.inf
-        safety = self.path_check_radius_m
+        ``stop_distance + obstacle_slowdown``) where a disk of ``path_check_radius_m`` would conflict with
+        a scan point (``(M, 2)``, map frame; see :func:`first_conflict`); ``inf`` if none."""
         horizon = self.stop_distance_m + self.obstacle_slowdown_m
-        d_now = np.linalg.norm(pts_map - p, axis=1)
-        near = d_now <= horizon + safety + 0.05
-        if not near.any():
-            return math.inf
-        pts_map, d_now = pts_map[near], d_now[near]
         ds = np.arange(0.0, horizon + 1e-9, 0.05)
         assert self.path is not None
         sa = np.minimum(s + ds, self._cum[-1])
         samples = np.stack([np.interp(sa, self._cum, self.path[:, 0]), np.interp(sa, self._cum, self.path[:, 1])], 1)
-        d = np.linalg.norm(pts_map[:, None, :] - samples[None, :, :], axis=2)
-        hit = ((d < safety) & (d < d_now[:, None] - 0.01)).any(axis=0)
-        return float(ds[int(np.argmax(hit))]) if hit.any() else math.inf
+        k = first_conflict(pts_map, samples, p, self.path_check_radius_m)
+        return float(ds[k]) if k >= 0 else math.inf
 
     @property
     def remaining_m(self) -> float:
@@ -258,7 +283,7 @@ class PathFollower:
         self.path_clearance_m = along
         if along <= self.stop_distance_m:
             self.status = BLOCKED
-            return Twist()
+            return self._back_off(pts)
         bumper = self.radius + self.emergency_distance_m
         half = self.bumper_half_width_m
         if not self._rotating and corridor_clearance(pts, 0.0, half) <= bumper:
@@ -267,7 +292,7 @@ class PathFollower:
                 self._rotating = True
             else:
                 self.status = BLOCKED
-                return Twist()
+                return self._back_off(pts)
         self.status = FOLLOWING
 
         if self._rotating:
@@ -293,28 +318,35 @@ class PathFollower:
                 w = self.heading_gain * alpha
                 return Twist(0.0, math.copysign(min(max(abs(w), self.min_angular_rps), self.max_angular_rps), alpha))
             self.status = BLOCKED
-            return Twist()
+            return self._back_off(pts)
         w = float(np.clip(v * kappa, -self.max_angular_rps, self.max_angular_rps))
         return Twist(float(v), w)
 
+    def _back_off(self, pts_base: NDArray[np.float64]) -> Twist:
+        """The twist while blocked: zero, or a slow reverse when something in front is closer than
+        ``radius + back_off_margin_m`` and the space behind the robot is free (a recovery for a robot
+        that ended up too close to an obstacle: from a little farther the next plan can go round it)."""
+        if self.back_off_mps <= 0 or len(pts_base) == 0:
+            return Twist()
+        d = np.hypot(pts_base[:, 0], pts_base[:, 1])
+        i = int(np.argmin(d))
+        if d[i] >= self.radius + self.back_off_margin_m or pts_base[i, 0] <= 0.0:
+            return Twist()
+        rear = corridor_clearance(pts_base, math.pi, self.bumper_half_width_m)
+        if rear <= self.radius + self.emergency_distance_m:
+            return Twist()
+        return Twist(-self.back_off_mps, 0.0)
+
     def _arc_clear(self, pts_base: NDArray[np.float64], kappa: float) -> bool:
-        """True unless the circular arc of curvature ``kappa`` ahead (``stop_distance_m`` long) brings the
-        body (``arc_check_radius_m``, default the footprint radius) closer to a scan point (``(M, 2)``,
-        base frame) that is within that radius than the robot is now."""
-        if len(pts_base) == 0:
-            return True
-        d_now = np.hypot(pts_base[:, 0], pts_base[:, 1])
-        near = d_now <= self.stop_distance_m + self.arc_check_radius_m + 0.05
-        if not near.any():
-            return True
-        pts, d_now = pts_base[near], d_now[near]
+        """True unless the body (``arc_check_radius_m``, default the footprint radius) on the circular arc
+        of curvature ``kappa`` ahead (``stop_distance_m`` long) conflicts with a scan point (``(M, 2)``,
+        base frame; see :func:`first_conflict`)."""
         s = np.arange(0.05, self.stop_distance_m + 1e-9, 0.05)
         if abs(kappa) < 1e-6:
             arc = np.stack([s, np.zeros_like(s)], 1)
         else:
             arc = np.stack([np.sin(kappa * s) / kappa, (1.0 - np.cos(kappa * s)) / kappa], 1)
-        d = np.linalg.norm(pts[:, None, :] - arc[None, :, :], axis=2)
-        return not ((d < self.arc_check_radius_m) & (d < d_now[:, None] - 0.01)).any()
+        return first_conflict(pts_base, arc, np.zeros(2), self.arc_check_radius_m) < 0
 
 
 class RouteFollower:

@@ -22,7 +22,7 @@ def ring_world() -> np.ndarray:
     return np.vstack(segs + bumps)
 
 
-def square_path(step=0.08):
+def square_path(step=0.15):
     """Poses around the ring (counter-clockwise), 1.25 laps, turning on the spot at the corners."""
     corners = [(1.5, 1.5), (12.5, 1.5), (12.5, 8.5), (1.5, 8.5)]
     poses = []

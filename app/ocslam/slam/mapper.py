@@ -288,20 +288,26 @@ class Slam:
             return Pose2()
         return Pose2.from_array(compose(self._last_pose, between(self._last_odom, np.zeros(3))))
 
-    def trajectory(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``(N,)`` stamps and ``(N, 3)`` corrected ``T_map_base`` of every processed scan."""
+    def _poses(self) -> NDArray[np.float64]:
+        """Cached corrected poses (recomputed after new scans or a correction)."""
         n = len(self.traj)
         key = (n, self.correction_count)
         if self._traj_cache is None or self._traj_cache[:2] != key:
             self._traj_cache = (n, self.correction_count, self.traj.poses(self.keyframes.poses.data))
-        return self.traj.stamps.data.copy(), self._traj_cache[2].copy()
+        return self._traj_cache[2]
+
+    def trajectory(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(N,)`` stamps and ``(N, 3)`` corrected ``T_map_base`` of every processed scan."""
+        return self.traj.stamps.data.copy(), self._poses().copy()
 
     def pose_at(self, stamp: float) -> Pose2:
         """``T_map_base`` at ``stamp``, interpolated between processed scans (clamped at the ends)."""
         if len(self.traj) == 0:
             return Pose2()
-        stamps, poses = self.trajectory()
-        return Pose2.from_array(interpolate(float(stamp), stamps, poses))
+        stamps = self.traj.stamps.data
+        i = int(np.clip(np.searchsorted(stamps, stamp, side="right") - 1, 0, max(len(stamps) - 2, 0)))
+        j = min(i + 2, len(stamps))
+        return Pose2.from_array(interpolate(float(stamp), stamps[i:j], self._poses()[i:j]))
 
     def keyframe_pose(self, k: int) -> Pose2:
         """Current (optimised) ``T_map_kf`` of keyframe ``k``."""

@@ -74,7 +74,9 @@ def test_path_around_a_wall_is_near_the_shortest() -> None:
     assert path is not None
     blocked = inflate(g, RP)
     rows, cols = np.nonzero(blocked)
-    corners = np.concatenate([np.stack([(cols + dx) * RES, (rows + dy) * RES], 1) for dx in (0, 1) for dy in (0, 1)])
+    corners = np.concatenate(
+        [np.stack([(cols + dx) * RES, (rows + dy) * RES], 1) for dx in (0, 1) for dy in (0, 1)]
+    )
     shortest = upper_hull_length(np.vstack([start, goal, corners]))
     # by hand: the blocked squares' top corners are (1.9, 2.05), (1.95, 2.1), (2.1, 2.1), (2.15, 2.05)
     assert shortest == pytest.approx(2 * math.hypot(0.875, 1.55) + 2 * math.sqrt(2) * RES + 3 * RES)
@@ -97,7 +99,9 @@ def test_clearance_cost_keeps_the_path_off_the_walls() -> None:
     wall = np.argwhere(d >= 65)[:, ::-1] * RES + RES / 2  # (x, y) of the occupied cell centres
 
     def min_clearance(path: np.ndarray) -> float:
-        p = np.concatenate([a + np.linspace(0, 1, 200)[:, None] * (b - a) for a, b in zip(path[:-1], path[1:])])
+        p = np.concatenate(
+            [a + np.linspace(0, 1, 200)[:, None] * (b - a) for a, b in zip(path[:-1], path[1:])]
+        )
         return float(np.linalg.norm(p[:, None] - wall[None], axis=2).min())
 
     assert R < min_clearance(hard) < R + 2 * RES
@@ -183,8 +187,10 @@ def test_bad_input() -> None:
 
 def dense_cells(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows, cols and points of a sampling of the path every RES/20 (grid origin at 0)."""
-    pts = [a + np.linspace(0, 1, int(np.linalg.norm(b - a) / (RES / 20)) + 2)[:, None] * (b - a)
-           for a, b in zip(path[:-1], path[1:])]
+    pts = [
+        a + np.linspace(0, 1, int(np.linalg.norm(b - a) / (RES / 20)) + 2)[:, None] * (b - a)
+        for a, b in zip(path[:-1], path[1:])
+    ]
     p = np.concatenate(pts)
     return np.floor(p[:, 1] / RES).astype(int), np.floor(p[:, 0] / RES).astype(int), p
 

@@ -41,7 +41,12 @@ def apartment() -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
     rect(w, 3.0, 0, 3.0 + t, 1.1), rect(w, 3.0, 1.9, 3.0 + t, 2.0)  # door in the south partition
     rect(w, 3.5, 2.0, 3.5 + t, 3.2), rect(w, 3.5, 4.0, 3.5 + t, 5)  # door in the north partition
     # furniture
-    rect(w, 1.0, 3.4, 1.8, 4.2), rect(w, 5.0, 0.5, 6.2, 0.9), rect(w, 4.8, 3.5, 5.0, 3.7), rect(w, 0.6, 0.6, 0.8, 0.8)
+    (
+        rect(w, 1.0, 3.4, 1.8, 4.2),
+        rect(w, 5.0, 0.5, 6.2, 0.9),
+        rect(w, 4.8, 3.5, 5.0, 3.7),
+        rect(w, 0.6, 0.6, 0.8, 0.8),
+    )
     return w, np.zeros_like(w), (1.5, 1.0)
 
 
@@ -145,7 +150,9 @@ class Sim:
         misses, the return's cell a hit."""
         x, y, th = self.pose
         ang = th + self.beam_angles
-        r, c, inside = self._cells(x + np.cos(ang)[:, None] * self.steps, y + np.sin(ang)[:, None] * self.steps)
+        r, c, inside = self._cells(
+            x + np.cos(ang)[:, None] * self.steps, y + np.sin(ang)[:, None] * self.steps
+        )
         hit = self.walls[r, c] | ~inside
         any_hit = hit.any(axis=1)
         first = hit.argmax(axis=1)
@@ -160,7 +167,9 @@ class Sim:
         free = inside & (self.steps[None, :] < reach[:, None] - RES / 2)
         miss = np.zeros(self.walls.shape, dtype=bool)
         miss[r[free], c[free]] = True
-        hr, hc, hin = self._cells(x + np.cos(ang[finite]) * ranges[finite], y + np.sin(ang[finite]) * ranges[finite])
+        hr, hc, hin = self._cells(
+            x + np.cos(ang[finite]) * ranges[finite], y + np.sin(ang[finite]) * ranges[finite]
+        )
         hitm = np.zeros(self.walls.shape, dtype=bool)
         hitm[hr[hin], hc[hin]] = True
         miss &= ~hitm
@@ -244,7 +253,9 @@ def test_explores_apartment() -> None:
 def test_explores_a_random_apartment_with_a_noisy_lidar() -> None:
     """1.5 cm range noise and 2 % dropped beams (inf, clearing up to 3 m even through walls): the grid is
     speckled and its walls ragged."""
-    sim, ctl, grid, cov = explore(random_apartment(1), max_time_s=600.0, range_noise_m=0.015, dropout=0.02, seed=1)
+    sim, ctl, grid, cov = explore(
+        random_apartment(1), max_time_s=600.0, range_noise_m=0.015, dropout=0.02, seed=1
+    )
     assert ctl.status == "done", (ctl.status, cov, sim.t)
     assert cov >= 0.90, cov
     assert sim.collisions == 0
@@ -327,13 +338,18 @@ if __name__ == "__main__":  # a sweep over random apartments: python tests/test_
     import time
 
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 10
-    print(f"{'lidar':6} {'seed':>4} {'status':>7} {'coverage':>8} {'time_s':>7} {'dist_m':>6} {'coll':>4} "
-          f"{'reached':>7} {'failed':>6} {'cpu_s':>6}")
+    print(
+        f"{'lidar':6} {'seed':>4} {'status':>7} {'coverage':>8} {'time_s':>7} {'dist_m':>6} {'coll':>4} "
+        f"{'reached':>7} {'failed':>6} {'cpu_s':>6}"
+    )
     for noisy in (False, True):
         for seed in range(n):
             kw = dict(range_noise_m=0.015, dropout=0.02, seed=seed) if noisy else {}
             c0 = time.process_time()
             sim, ctl, grid, cov = explore(random_apartment(seed), 900.0, **kw)
-            print(f"{'noisy' if noisy else 'clean':6} {seed:4d} {ctl.status:>7} {cov:8.3f} {sim.t:7.1f} "
-                  f"{sim.distance:6.1f} {sim.collisions:4d} {ctl.goals_reached:7d} {ctl.goals_failed:6d} "
-                  f"{time.process_time() - c0:6.1f}", flush=True)
+            print(
+                f"{'noisy' if noisy else 'clean':6} {seed:4d} {ctl.status:>7} {cov:8.3f} {sim.t:7.1f} "
+                f"{sim.distance:6.1f} {sim.collisions:4d} {ctl.goals_reached:7d} {ctl.goals_failed:6d} "
+                f"{time.process_time() - c0:6.1f}",
+                flush=True,
+            )

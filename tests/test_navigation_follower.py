@@ -43,12 +43,14 @@ def box_points_map(center: np.ndarray, half: float, spacing: float = 0.01) -> np
     """Outline of an axis-aligned square obstacle (map frame)."""
     s = np.arange(-half, half + 1e-9, spacing)
     c = np.asarray(center)
-    return np.concatenate([
-        np.stack([c[0] + s, np.full_like(s, c[1] - half)], 1),
-        np.stack([c[0] + s, np.full_like(s, c[1] + half)], 1),
-        np.stack([np.full_like(s, c[0] - half), c[1] + s], 1),
-        np.stack([np.full_like(s, c[0] + half), c[1] + s], 1),
-    ])
+    return np.concatenate(
+        [
+            np.stack([c[0] + s, np.full_like(s, c[1] - half)], 1),
+            np.stack([c[0] + s, np.full_like(s, c[1] + half)], 1),
+            np.stack([np.full_like(s, c[0] - half), c[1] + s], 1),
+            np.stack([np.full_like(s, c[0] + half), c[1] + s], 1),
+        ]
+    )
 
 
 def run(follower, pose: Pose2, seconds: float, obstacles_map: np.ndarray | None = None, route: bool = False):
@@ -186,18 +188,24 @@ def test_route_follower_visits_waypoints_in_order() -> None:
     for w in square_route():
         d = np.linalg.norm(xy - w, axis=1)
         # the last waypoint is the start: look at the end of the run for it
-        i = int(np.argmax(d < 0.25)) if not np.allclose(w, [0, 0]) else len(xy) - 1 - int(np.argmax(d[::-1] < 0.25))
+        i = (
+            int(np.argmax(d < 0.25))
+            if not np.allclose(w, [0, 0])
+            else len(xy) - 1 - int(np.argmax(d[::-1] < 0.25))
+        )
         assert d[i] < 0.25
         first_visit.append(i)
     assert first_visit == sorted(first_visit)
     # the robot stayed near the polyline (cross-track error bounded by the lookahead's corner cutting)
     seg = np.vstack([[0.0, 0.0], square_route()])
+
     def dist_to_polyline(p):
         best = np.inf
         for a, b in zip(seg[:-1], seg[1:]):
             t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0, 1)
             best = min(best, np.linalg.norm(p - (a + t * (b - a))))
         return best
+
     assert max(dist_to_polyline(p) for p in xy) < 0.15
 
 
@@ -220,7 +228,7 @@ def test_backs_off_when_blocked_too_close() -> None:
     something is right behind too; with the wall 20 cm ahead just stop."""
     f = PathFollower(ROBOT)
     f.set_path([[0.0, 0.0], [2.0, 0.0]])
-    wall_at = lambda x: np.stack([np.full(61, x), np.linspace(-0.3, 0.3, 61)], 1)  # noqa: E731
+    wall_at = lambda x: np.stack([np.full(61, x), np.linspace(-0.3, 0.3, 61)], 1)
     cmd = f.compute(Pose2(), scan_of_points(wall_at(0.12)), Pose2())
     assert f.status == "blocked" and cmd.linear_x < 0 and cmd.angular_z == 0
     cmd = f.compute(Pose2(), scan_of_points(np.vstack([wall_at(0.12), wall_at(-0.13)])), Pose2())

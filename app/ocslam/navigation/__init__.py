@@ -18,8 +18,8 @@ from app.ocslam.navigation.astar import astar, cost_to_go, plan_path
 from app.ocslam.navigation.costmap import CostMap, build_costmap, inflate
 from app.ocslam.navigation.explorer import ExplorationController, FrontierExplorer
 from app.ocslam.navigation.follower import PathFollower, RouteFollower, StuckDetector
-from app.ocslam.navigation.goto import GoToController
 from app.ocslam.navigation.frontiers import Frontier, find_frontiers
+from app.ocslam.navigation.goto import GoToController
 
 __all__ = [
     "CostMap",

@@ -62,9 +62,14 @@ def astar(cm: CostMap, start: tuple[int, int], goal: tuple[int, int]) -> list[tu
     gr1, gc1 = gr + 1, gc + 1
     # (flat offset, length, orthogonal neighbour offsets that must be free for a diagonal)
     moves = (
-        (1, 1.0, ()), (-1, 1.0, ()), (wp, 1.0, ()), (-wp, 1.0, ()),
-        (wp + 1, SQRT2, (wp, 1)), (wp - 1, SQRT2, (wp, -1)),
-        (-wp + 1, SQRT2, (-wp, 1)), (-wp - 1, SQRT2, (-wp, -1)),
+        (1, 1.0, ()),
+        (-1, 1.0, ()),
+        (wp, 1.0, ()),
+        (-wp, 1.0, ()),
+        (wp + 1, SQRT2, (wp, 1)),
+        (wp - 1, SQRT2, (wp, -1)),
+        (-wp + 1, SQRT2, (-wp, 1)),
+        (-wp - 1, SQRT2, (-wp, -1)),
     )
     k = SQRT2 - 2.0
     n = len(trav)
@@ -96,7 +101,7 @@ def astar(cm: CostMap, start: tuple[int, int], goal: tuple[int, int]) -> list[tu
                 r, c = divmod(v, wp)
                 dr = abs(r - gr1)
                 dc = abs(c - gc1)
-                hv = dr + dc + k * (dr if dr < dc else dc)
+                hv = dr + dc + k * (min(dc, dr))
                 push(heap, (nv + hv, hv, v))
     if parent[g] < 0:
         return None
@@ -119,7 +124,9 @@ def _graph(cm: CostMap) -> csr_matrix:
     idx = np.arange(h * w).reshape(h, w)
     rows, cols, wts = [], [], []
 
-    def add(src: tuple[slice, slice], dst: tuple[slice, slice], length: float, extra: NDArray[np.bool_] | None):
+    def add(
+        src: tuple[slice, slice], dst: tuple[slice, slice], length: float, extra: NDArray[np.bool_] | None
+    ):
         ok = trav[src] & trav[dst]
         if extra is not None:
             ok &= extra
@@ -164,7 +171,9 @@ def extract_path(pred: NDArray[np.int32], width: int, goal: tuple[int, int]) -> 
     return out
 
 
-def line_of_sight(cm: CostMap, a: NDArray[np.float64], b: NDArray[np.float64], max_cost: float = math.inf) -> bool:
+def line_of_sight(
+    cm: CostMap, a: NDArray[np.float64], b: NDArray[np.float64], max_cost: float = math.inf
+) -> bool:
     """True when every cell the segment ``a → b`` (continuous crop coordinates ``(col, row)``) touches
     is traversable and costs at most ``max_cost``."""
     cells = segment_cells(a, b)
@@ -227,7 +236,9 @@ def _max_cost(cm: CostMap, a: NDArray[np.float64], b: NDArray[np.float64]) -> fl
     return float(cm.cost[cells[:, 0], cells[:, 1]].max()) if len(cells) else math.inf
 
 
-def cut_corners(cm: CostMap, pts: NDArray[np.float64], rounds: int = 3, steps: int = 6) -> NDArray[np.float64]:
+def cut_corners(
+    cm: CostMap, pts: NDArray[np.float64], rounds: int = 3, steps: int = 6
+) -> NDArray[np.float64]:
     """Shorten a polyline (continuous crop coordinates) by cutting its corners.
 
     Each interior vertex ``v`` between ``a`` and ``b`` is replaced by the cut ``p = v + t(a − v)``,

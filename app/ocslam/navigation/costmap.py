@@ -227,7 +227,12 @@ def build_costmap(
     if extra_obstacles_xy is not None and len(np.asarray(extra_obstacles_xy)):
         cells = grid.world_to_cell(np.asarray(extra_obstacles_xy, dtype=np.float64).reshape(-1, 2))
         cells -= np.array([r0, c0])
-        ok = (cells[:, 0] >= 0) & (cells[:, 0] < sub.shape[0]) & (cells[:, 1] >= 0) & (cells[:, 1] < sub.shape[1])
+        ok = (
+            (cells[:, 0] >= 0)
+            & (cells[:, 0] < sub.shape[0])
+            & (cells[:, 1] >= 0)
+            & (cells[:, 1] < sub.shape[1])
+        )
         occupied[cells[ok, 0], cells[ok, 1]] = True
     unknown = unknown_mask(sub)
     obstacles = occupied | unknown if unknown_is_obstacle else occupied
@@ -256,12 +261,23 @@ def build_costmap(
         clearance=dist,
     )
     if start_xy is not None:
-        _add_escape(cm, np.asarray(start_xy, dtype=np.float64).reshape(2), robot_radius_m, escape_radius_m, escape_cost)
+        _add_escape(
+            cm,
+            np.asarray(start_xy, dtype=np.float64).reshape(2),
+            robot_radius_m,
+            escape_radius_m,
+            escape_cost,
+        )
     return cm
 
 
-def _add_escape(cm: CostMap, start_xy: NDArray[np.float64], radius_m: float, escape_radius_m: float | None,
-                escape_cost: float) -> None:
+def _add_escape(
+    cm: CostMap,
+    start_xy: NDArray[np.float64],
+    radius_m: float,
+    escape_radius_m: float | None,
+    escape_cost: float,
+) -> None:
     """Let a start inside the inflation band (or on a noisy occupied cell) leave it at a high cost."""
     cell = cm.to_cells(start_xy[None])[0]
     if not cm.in_bounds(cell[None])[0] or cm.traversable[cell[0], cell[1]]:

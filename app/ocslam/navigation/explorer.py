@@ -34,7 +34,12 @@ from app.ocslam.messages import LaserScan, OccupancyGrid, Twist
 from app.ocslam.navigation.astar import cost_to_go, extract_path, local_to_xy, smooth_path
 from app.ocslam.navigation.costmap import OCCUPIED_THRESHOLD, CostMap, build_costmap
 from app.ocslam.navigation.follower import ARRIVED, BLOCKED, PathFollower, StuckDetector
-from app.ocslam.navigation.frontiers import FRONTIER_FREE_THRESHOLD, Frontier, frontiers_from_labels, label_frontiers
+from app.ocslam.navigation.frontiers import (
+    FRONTIER_FREE_THRESHOLD,
+    Frontier,
+    frontiers_from_labels,
+    label_frontiers,
+)
 from app.ocslam.se2 import Pose2
 
 
@@ -144,7 +149,9 @@ class FrontierExplorer:
             return None
         cm = self._costmap(grid, robot)
         data = np.asarray(grid.data)[cm.row0 : cm.row0 + cm.shape[0], cm.col0 : cm.col0 + cm.shape[1]]
-        labels, n = label_frontiers(data, min_size_cells=self.min_frontier_size, free_threshold=self.free_threshold)
+        labels, n = label_frontiers(
+            data, min_size_cells=self.min_frontier_size, free_threshold=self.free_threshold
+        )
         self.frontiers = frontiers_from_labels(grid, labels, n, cm.row0, cm.col0)
         s_cell = cm.to_cells(robot[None])[0]
         if n == 0 or not cm.in_bounds(s_cell[None])[0]:
@@ -220,7 +227,11 @@ class FrontierExplorer:
 
     @staticmethod
     def _sees(
-        cm: CostMap, rows: NDArray[np.int64], cols: NDArray[np.int64], fr: NDArray[np.int64], fc: NDArray[np.int64]
+        cm: CostMap,
+        rows: NDArray[np.int64],
+        cols: NDArray[np.int64],
+        fr: NDArray[np.int64],
+        fc: NDArray[np.int64],
     ) -> NDArray[np.bool_]:
         """``(N,)`` True where the straight line from cell ``(rows, cols)`` to its frontier cell
         ``(fr, fc)`` crosses no occupied cell (an approach cell must see its frontier, not face it through
@@ -258,7 +269,6 @@ class FrontierExplorer:
         self.goal_xy = None
         self.path = None
         self.goal_frontier = None
-        return None
 
 
 class ExplorationController:
@@ -294,7 +304,9 @@ class ExplorationController:
         self.blocked_replan_s = float(blocked_replan_s)
         self.max_blocked_replans = int(max_blocked_replans)
         self.done_confirmations = int(done_confirmations)
-        self.stuck = StuckDetector(time_s=stuck_time_s, distance_m=stuck_distance_m, min_cmd_mps=stuck_min_cmd_mps)
+        self.stuck = StuckDetector(
+            time_s=stuck_time_s, distance_m=stuck_distance_m, min_cmd_mps=stuck_min_cmd_mps
+        )
         self.stuck_events = 0
         self.status = "idle"
         self.goals_reached = 0
@@ -353,7 +365,9 @@ class ExplorationController:
         p = np.array([T_map_base.x, T_map_base.y])
         map_key = (id(grid), float(grid.stamp))
         new_map = map_key != self._last_map_key
-        need_plan = self.follower.path is None and (new_map or now - self._last_plan_t >= self.replan_period_s)
+        need_plan = self.follower.path is None and (
+            new_map or now - self._last_plan_t >= self.replan_period_s
+        )
 
         if self.follower.status == ARRIVED:
             self.explorer.mark_reached()

@@ -229,7 +229,9 @@ class PathFollower:
         ds = np.arange(0.0, horizon + 1e-9, 0.05)
         assert self.path is not None
         sa = np.minimum(s + ds, self._cum[-1])
-        samples = np.stack([np.interp(sa, self._cum, self.path[:, 0]), np.interp(sa, self._cum, self.path[:, 1])], 1)
+        samples = np.stack(
+            [np.interp(sa, self._cum, self.path[:, 0]), np.interp(sa, self._cum, self.path[:, 1])], 1
+        )
         k = first_conflict(pts_map, samples, p, self.path_check_radius_m)
         return float(ds[k]) if k >= 0 else math.inf
 
@@ -316,7 +318,9 @@ class PathFollower:
             if abs(alpha) > self._ALIGNED_RAD:
                 self._rotating = True
                 w = self.heading_gain * alpha
-                return Twist(0.0, math.copysign(min(max(abs(w), self.min_angular_rps), self.max_angular_rps), alpha))
+                return Twist(
+                    0.0, math.copysign(min(max(abs(w), self.min_angular_rps), self.max_angular_rps), alpha)
+                )
             self.status = BLOCKED
             return self._back_off(pts)
         w = float(np.clip(v * kappa, -self.max_angular_rps, self.max_angular_rps))
@@ -404,7 +408,10 @@ class RouteFollower:
         if self.follower.path is None:
             self._restart(p)
         n = len(self.waypoints)
-        while self.current < n - 1 and np.linalg.norm(self.waypoints[self.current] - p) <= self.waypoint_tolerance_m:
+        while (
+            self.current < n - 1
+            and np.linalg.norm(self.waypoints[self.current] - p) <= self.waypoint_tolerance_m
+        ):
             self.current += 1
         twist = self.follower.compute(T_map_base, scan, T_base_scan)
         self.current = max(self.current, min(n - 1, self._k0 + self.follower.progress_index))

@@ -41,7 +41,9 @@ class Frontier:
         return self.size * resolution
 
 
-def frontier_mask(data: NDArray[np.integer], free_threshold: int = FRONTIER_FREE_THRESHOLD) -> NDArray[np.bool_]:
+def frontier_mask(
+    data: NDArray[np.integer], free_threshold: int = FRONTIER_FREE_THRESHOLD
+) -> NDArray[np.bool_]:
     """``(H, W)`` True on free cells with an unknown (or off-grid) 4-neighbour."""
     unknown = np.pad(unknown_mask(data), 1, constant_values=True)
     near_unknown = unknown[:-2, 1:-1] | unknown[2:, 1:-1] | unknown[1:-1, :-2] | unknown[1:-1, 2:]
@@ -98,5 +100,6 @@ def frontiers_from_labels(
     splits = np.cumsum(sizes)[:-1]
     cell_groups = np.split(np.stack([rows, cols], axis=1).astype(np.int64), splits)
     return [
-        Frontier(centroid_xy=np.array([cx[i], cy[i]]), size=int(sizes[i]), cells=cell_groups[i]) for i in range(n)
+        Frontier(centroid_xy=np.array([cx[i], cy[i]]), size=int(sizes[i]), cells=cell_groups[i])
+        for i in range(n)
     ]

@@ -116,7 +116,9 @@ class GoToController:
             need = True
         if self._stuck_flag:
             self._stuck_flag = False
-            self.virtual_obstacles.append(StuckDetector.obstacle_ahead(T_map_base, self.robot.footprint_radius_m))
+            self.virtual_obstacles.append(
+                StuckDetector.obstacle_ahead(T_map_base, self.robot.footprint_radius_m)
+            )
             need = True
         if self._blocked_replans > self.max_blocked_replans:
             self.status = "failed"

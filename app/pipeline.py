@@ -128,12 +128,33 @@ def make_detector(cfg: Config):
     return Detector(cfg.detector, resolve_path(cfg.detector.model_path))
 
 
+def camera_render_size(cfg: Config) -> tuple[int, int]:
+    """The rendered camera size: ``camera.render_width`` (keeping the aspect) or the full resolution."""
+    c = cfg.camera
+    if c.render_width and c.render_width < c.width:
+        w = int(c.render_width)
+        return w, max(1, int(round(c.height * w / c.width)))
+    return int(c.width), int(c.height)
+
+
+def build_camera_model(cfg: Config, robot_model: Any):
+    """The camera model of the consciousness: K from the FOV at the rendered size, extrinsics from the URDF."""
+    from app.ocslam.messages import CameraInfo
+    from app.ocslam.projection import CameraModel
+
+    w, h = camera_render_size(cfg)
+    return CameraModel(
+        info=CameraInfo.from_fov(w, h, cfg.camera.hfov_rad),
+        T_base_optical=robot_model.T_base_camera_optical,
+        T_base_scan=robot_model.T_base_scan,
+    )
+
+
 class Pipeline:
     """Simulator + odometry + SLAM + detector + consciousness, advanced one physics step at a time."""
 
     def __init__(self, cfg: Config, *, world: Any = None, detector: Any = "auto") -> None:
         from app.ocslam.consciousness import Consciousness
-        from app.ocslam.projection import CameraModel
         from app.ocslam.slam import Slam
         from app.robot_model import RobotModel
         from app.sim_world import SimWorld
@@ -157,12 +178,9 @@ class Pipeline:
                 log.error("detector disabled: %s", e)
                 detector = None
         self.detector = detector
-        cam_w, cam_h = self.camera_render_size()
-        self.camera_model = CameraModel(
-            info=self.sim.camera_info(cam_w, cam_h),
-            T_base_optical=self.robot_model.T_base_camera_optical,
-            T_base_scan=self.robot_model.T_base_scan,
-        )
+        if self.detector is not None and hasattr(self.detector, "world"):
+            self.detector.world = self.world  # the oracle's visible-fraction test renders silhouettes
+        self.camera_model = build_camera_model(cfg, self.robot_model)
         self.consciousness = Consciousness(cfg.consciousness, self.camera_model)
 
         self.timer = StageTimer()
@@ -213,11 +231,7 @@ class Pipeline:
     # setup helpers
     # ---------------------------------------------------------------------------------------------
     def camera_render_size(self) -> tuple[int, int]:
-        c = self.cfg.camera
-        if c.render_width and c.render_width < c.width:
-            w = int(c.render_width)
-            return w, max(1, int(round(c.height * w / c.width)))
-        return int(c.width), int(c.height)
+        return camera_render_size(self.cfg)
 
     def _on_reset(self) -> None:
         self.restart_odometry(Pose2())

@@ -220,8 +220,8 @@ def load_session(pipe: "Pipeline", path: str | Path) -> None:
         raise ValueError(f"{f}: unreadable session state ({e})") from None
     if int(state.get("version", 0)) != SESSION_VERSION:
         raise ValueError(f"{f}: session version {state.get('version')} is not {SESSION_VERSION}")
-    slam = Slam.from_state_dict(pipe.cfg.slam, state["slam"], T_base_scan=pipe.T_base_scan)
-    cons = Consciousness.from_state_dict(pipe.cfg.consciousness, pipe.camera_model, state["consciousness"])
+    slam = Slam.from_state_dict(pipe.cfg.slam, state["slam"])
+    cons = Consciousness.from_state_dict(state["consciousness"], pipe.cfg.consciousness, pipe.camera_model)
     pipe.sim.set_robot_pose(Pose2.from_array(state["T_world_base_true"]))
     pipe.slam = slam
     pipe.consciousness = cons

@@ -64,3 +64,22 @@ def test_bad_files(tmp_path) -> None:
         Config.load(tmp_path / "range.yaml")
     with pytest.raises(ConfigError, match="cannot read"):
         Config.load(tmp_path / "missing.yaml")
+
+
+def test_config_reference_is_up_to_date() -> None:
+    """docs/config.md is generated from the config metadata: regenerate it with scripts/gen_config_doc.py."""
+    import importlib.util
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("gen_config_doc", root / "scripts" / "gen_config_doc.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert (root / "docs" / "config.md").read_text(encoding="utf-8") == mod.render()
+
+
+def test_every_live_field_has_a_range_or_choices() -> None:
+    """Sliders need bounds: a live numeric field without min/max could not be refused when out of range."""
+    for path, f, value in Config().iter_fields():
+        if f.metadata.get("live") and isinstance(value, (int, float)) and not isinstance(value, bool):
+            assert f.metadata.get("min") is not None and f.metadata.get("max") is not None, path

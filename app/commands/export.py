@@ -95,9 +95,13 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if what == "objects":
         from app.ocslam.consciousness import Consciousness
+        from app.pipeline import build_camera_model
+        from app.robot_model import RobotModel
         from app.session import object_to_detection3d
 
-        objects = Consciousness.objects_from_state_dict(state["consciousness"])
+        cons = Consciousness.from_state_dict(state["consciousness"], cfg.consciousness,
+                                             build_camera_model(cfg, RobotModel.load()))
+        objects = cons.objects
         thr = cfg.consciousness.presence_threshold
         frame = "map"
         dets = [object_to_detection3d(o, float(state.get("sim_time", 0.0)), o.frame_id or frame)

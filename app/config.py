@@ -141,6 +141,12 @@ class CameraConfig:
         max=1920,
         help="render at this width (height keeps the aspect; the frame's K matches the rendered size); 0: full width",
     )
+    async_render: bool = param(
+        True, help="render in a separate process (overlaps with SLAM and the detector on the other core)"
+    )
+    latency_s: float = param(
+        0.1, min=0.0, max=1.0, unit="s", help="camera latency: a frame is processed this long after its stamp"
+    )
     noise_std: float = param(2.0, min=0.0, max=50.0, help="pixel noise σ (0-255)")
 
 

@@ -181,6 +181,14 @@ class Pipeline:
         if self.detector is not None and hasattr(self.detector, "world"):
             self.detector.world = self.world  # the oracle's visible-fraction test renders silhouettes
         self.camera_model = build_camera_model(cfg, self.robot_model)
+        self.camera_worker = None
+        if self.detector is not None and cfg.camera.async_render:
+            from app.render_worker import CameraWorker
+
+            try:
+                self.camera_worker = CameraWorker(self.world, cfg, seed=cfg.sim.seed)
+            except Exception as e:  # fall back to rendering in the loop
+                log.warning("camera render process unavailable (%s); rendering in the loop", e)
         self.consciousness = Consciousness(cfg.consciousness, self.camera_model)
 
         self.timer = StageTimer()
@@ -436,7 +444,12 @@ class Pipeline:
             self._next_image += 1.0 / self.cfg.camera.rate_hz
             if self.detector is not None:
                 self._odometry_update()
-                self._camera_update()
+                self._camera_trigger()
+        w = self.camera_worker
+        if w is not None and w.pending and t + 1e-9 >= w.oldest_stamp() + self.cfg.camera.latency_s:
+            with self.timer.time("render"):  # only the time spent waiting for the render process
+                frame = w.collect()
+            self._camera_process(frame)
 
     def _odometry_update(self) -> None:
         msg = self.odometry.update(self.sim.read_encoders())
@@ -469,11 +482,20 @@ class Pipeline:
             self._true_distance += true_map.distance(self._last_true)
         self._last_true = true_map
 
-    def _camera_update(self) -> None:
+    def _camera_trigger(self) -> None:
+        """A camera frame is due: render it now, or ask the render process for it."""
         w, h = self.camera_render_size()
         oracle = self.cfg.detector.kind == "oracle"
+        if self.camera_worker is not None:
+            self.camera_worker.request(self.sim.time, self.sim.true_pose(), width=w, height=h, segmentation=oracle)
+            return
         with self.timer.time("render"):
             frame = self.sim.render_camera(w, h, segmentation=oracle)
+        self._camera_process(frame)
+
+    def _camera_process(self, frame) -> None:
+        """Detector and fusion on one camera frame (stamped when it was taken)."""
+        oracle = self.cfg.detector.kind == "oracle"
         self.counters.images += 1
         with self.timer.time("detector"):
             try:
@@ -548,6 +570,9 @@ class Pipeline:
         from app.ocslam.consciousness import Consciousness
         from app.ocslam.slam import Slam
 
+        if self.camera_worker is not None:
+            while self.camera_worker.pending:  # frames of the old run
+                self.camera_worker.collect()
         self.sim.reset()
         self.slam = Slam(self.cfg.slam, T_base_scan=self.T_base_scan)
         self.consciousness = Consciousness(self.cfg.consciousness, self.camera_model)
@@ -713,4 +738,7 @@ class Pipeline:
         return out
 
     def close(self) -> None:
+        if self.camera_worker is not None:
+            self.camera_worker.close()
+            self.camera_worker = None
         self.sim.close()

@@ -1,0 +1,131 @@
+"""Camera rendering in a separate process, so it overlaps with SLAM and the detector on the other core.
+
+pybullet's TinyRenderer is the loop's most expensive stage (tens of ms per frame, pure pixel fill on one
+core). :class:`CameraWorker` keeps a second pybullet client with the same world in a child process. The
+loop *requests* a frame at its stamp with the robot's true pose and *collects* it a fixed sim-time latency
+later (``camera.latency_s``, like a real camera driver's), blocking only if the worker is late. Frames are
+therefore processed at the same sim step whatever the machine's load: runs stay deterministic.
+
+    worker = CameraWorker(world, cfg)
+    worker.request(stamp, T_world_base, width=224, height=168)
+    ...                                   # physics, LIDAR, SLAM run meanwhile
+    frame = worker.collect()              # CameraFrame (stamp = the request's)
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import traceback
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from app.ocslam.se2 import Pose2
+
+log = logging.getLogger(__name__)
+
+
+class CameraWorkerError(RuntimeError):
+    """The render process died or answered with an error."""
+
+
+@dataclass(frozen=True)
+class _Request:
+    stamp: float
+    pose: tuple[float, float, float]
+    width: int
+    height: int
+    segmentation: bool
+
+
+def _worker_main(conn: Any, world: Any, cfg: Any, seed: int) -> None:
+    """Child process: a SimWorld that only renders."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        from app.sim_world import SimWorld
+
+        sim = SimWorld(world, cfg, seed=seed)
+    except BaseException:  # noqa: BLE001
+        conn.send(("error", traceback.format_exc()))
+        return
+    conn.send(("ready", None))
+    while True:
+        try:
+            req = conn.recv()
+        except (EOFError, OSError):
+            break
+        if req is None:
+            break
+        try:
+            sim.set_robot_pose(Pose2(*req.pose))
+            sim.time = req.stamp
+            frame = sim.render_camera(req.width, req.height, segmentation=req.segmentation)
+            conn.send(("frame", frame))
+        except BaseException:  # noqa: BLE001
+            conn.send(("error", traceback.format_exc()))
+    sim.close()
+
+
+class CameraWorker:
+    """A render process with its own copy of the world (see the module docstring)."""
+
+    def __init__(self, world: Any, cfg: Any, seed: int = 0, *, start_timeout_s: float = 120.0) -> None:
+        ctx = mp.get_context("spawn")  # never fork a process that holds a pybullet client
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_worker_main, args=(child, world, cfg, seed), daemon=True,
+                                 name="ocslam-camera")
+        self._proc.start()
+        child.close()
+        self._pending: deque[_Request] = deque()
+        if not self._conn.poll(start_timeout_s):
+            self.close()
+            raise CameraWorkerError("the camera render process did not start")
+        kind, payload = self._conn.recv()
+        if kind != "ready":
+            self.close()
+            raise CameraWorkerError(f"the camera render process failed to start:\n{payload}")
+
+    @property
+    def pending(self) -> int:
+        return len(self._pending)
+
+    def oldest_stamp(self) -> float | None:
+        return self._pending[0].stamp if self._pending else None
+
+    def request(self, stamp: float, T_world_base: Pose2, *, width: int, height: int, segmentation: bool = False) -> None:
+        req = _Request(float(stamp), (T_world_base.x, T_world_base.y, T_world_base.yaw), int(width), int(height),
+                       bool(segmentation))
+        self._conn.send(req)
+        self._pending.append(req)
+
+    def collect(self, timeout_s: float = 60.0):
+        """The oldest requested frame (blocks until it is rendered)."""
+        if not self._pending:
+            raise CameraWorkerError("collect() without a pending request")
+        if not self._conn.poll(timeout_s):
+            raise CameraWorkerError(f"no frame from the render process within {timeout_s:.0f} s")
+        kind, payload = self._conn.recv()
+        self._pending.popleft()
+        if kind != "frame":
+            raise CameraWorkerError(f"render failed:\n{payload}")
+        return payload
+
+    def close(self) -> None:
+        try:
+            if self._proc.is_alive():
+                self._conn.send(None)
+                self._proc.join(timeout=5)
+        except (OSError, BrokenPipeError):
+            pass
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(timeout=5)
+        self._conn.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass

@@ -1,0 +1,38 @@
+"""The camera render process returns exactly what the in-process renderer does, stamped as requested."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.config import Config
+from app.ocslam.se2 import Pose2
+from app.render_worker import CameraWorker
+from app.sim_world import SimWorld
+from app.worlds import load_world
+from app.config import resolve_path
+
+
+def test_worker_frames_match_in_process_renders() -> None:
+    cfg = Config.load(None, ["camera.noise_std=0"])
+    world = load_world(resolve_path(cfg.sim.world))
+    sim = SimWorld(world, cfg, seed=0)
+    worker = CameraWorker(world, cfg, seed=0)
+    try:
+        poses = [world.start, world.start @ Pose2(0.5, 0.0, 0.4)]
+        for i, T in enumerate(poses):
+            worker.request(10.0 + i, T, width=160, height=120, segmentation=True)
+        assert worker.pending == 2 and worker.oldest_stamp() == 10.0
+        for i, T in enumerate(poses):
+            frame = worker.collect()
+            sim.set_robot_pose(T)
+            ref = sim.render_camera(160, 120, segmentation=True)
+            assert frame.stamp == pytest.approx(10.0 + i)
+            np.testing.assert_array_equal(frame.image.data, ref.image.data)
+            np.testing.assert_array_equal(frame.segmentation, ref.segmentation)
+        assert worker.pending == 0
+        with pytest.raises(Exception, match="without a pending request"):
+            worker.collect()
+    finally:
+        worker.close()
+        sim.close()

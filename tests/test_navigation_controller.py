@@ -75,3 +75,44 @@ def test_stuck_robot_marks_a_virtual_obstacle_and_gives_the_goal_up() -> None:
     # a short wall across the heading, just ahead of the robot's front
     assert np.allclose(wall[:, 0], 1.0 + 0.105 + 0.05)
     assert wall[:, 1].min() < 1.25 - 0.2 and wall[:, 1].max() > 1.25 + 0.2
+
+
+def test_no_map_yet_is_not_done_and_bad_input_does_not_crash() -> None:
+    ctl = ExplorationController(RobotConfig())
+    ctl.start()
+    placeholder = OccupancyGrid(
+        RES, Pose2(), np.full((1, 1), -1, dtype=np.int8)
+    )  # SLAM before its first scan
+    empty = OccupancyGrid(RES, Pose2(), np.zeros((0, 0), dtype=np.int8))
+    t = 0.0
+    for g in (placeholder, empty):
+        for _ in range(60):
+            assert ctl.compute(g, Pose2(1.0, 1.0, 0.0), now=t) == Twist()
+            t += 0.1
+    assert ctl.status == "exploring" and ctl.explorer.last_reason.startswith("no map")
+    assert ctl.compute(room_with_opening(), Pose2(float("nan"), 1.0, 0.0), now=t) == Twist()
+    assert ctl.status == "exploring"
+    # and then a real map: off it goes
+    assert ctl.compute(room_with_opening(), Pose2(1.0, 1.25, 0.0), now=t + 1.0).linear_x > 0
+
+
+def test_goto_controller_states() -> None:
+    import pytest
+
+    from app.ocslam.navigation import GoToController
+
+    with pytest.raises(ValueError):
+        GoToController(RobotConfig(), [float("nan"), 0.0])
+    g = closed_room()
+    goto = GoToController(RobotConfig(), [2.5, 1.25])
+    cmd = goto.compute(g, Pose2(1.0, 1.25, 0.0), now=0.0)
+    assert goto.status == "following" and cmd.linear_x > 0
+    assert np.allclose(goto.path[-1], [2.5, 1.25])
+    goto.cancel()
+    assert goto.status == "cancelled" and goto.compute(g, Pose2(1.0, 1.25, 0.0), now=0.1) == Twist()
+    # a goal outside the walls (known unknown beyond them) cannot be reached: failed at once
+    out = GoToController(RobotConfig(), [3.4, 1.25])
+    assert out.compute(g, Pose2(1.0, 1.25, 0.0), now=0.0) == Twist() and out.status == "failed"
+    # already there
+    here = GoToController(RobotConfig(), [1.02, 1.25])
+    assert here.compute(g, Pose2(1.0, 1.25, 0.0), now=0.0) == Twist() and here.status == "arrived"

@@ -48,14 +48,18 @@ def free_mask(data: NDArray[np.integer], free_threshold: int = FREE_THRESHOLD) -
 def obstacle_distance_m(obstacles: BoolGrid, resolution: float) -> NDArray[np.float32]:
     """``(H, W)`` Euclidean distance (m) from each cell centre to the nearest obstacle cell centre.
 
-    ``inf`` everywhere when there is no obstacle. Exact (OpenCV's precise L2 distance transform).
+    ``inf`` everywhere when there is no obstacle. Exact and reproducible (OpenCV's precise L2 distance
+    transform snapped to the integer squared distances).
     """
     obstacles = np.asarray(obstacles, dtype=bool)
     if not obstacles.any():
         return np.full(obstacles.shape, np.inf, dtype=np.float32)
     src = np.where(obstacles, 0, 255).astype(np.uint8)
     dist = cv2.distanceTransform(src, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    return dist * np.float32(resolution)
+    # the precise transform is exact up to float32 rounding that varies from run to run (threads, SIMD);
+    # squared distances between cell centres are integers: snap to them so results are reproducible
+    exact = np.sqrt(np.rint(dist.astype(np.float64) ** 2))
+    return (exact * resolution).astype(np.float32)
 
 
 def inflate(

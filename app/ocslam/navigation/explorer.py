@@ -91,6 +91,7 @@ class FrontierExplorer:
         self.path: NDArray[np.float64] | None = None
         self.frontiers: list[Frontier] = []  # the last call's frontiers (for drawing)
         self.goal_frontier: Frontier | None = None
+        self.last_reason = ""  # why the last next_goal() returned None
 
     # -- bookkeeping ---------------------------------------------------------------------------
     def reset(self) -> None:
@@ -142,10 +143,17 @@ class FrontierExplorer:
     def next_goal(
         self, grid: OccupancyGrid, T_map_base: Pose2
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-        """``(goal_xy (2,), path (N, 2))`` towards the best reachable frontier, or None when no reachable
-        frontier is left (exploration done, as far as this map tells)."""
+        """``(goal_xy (2,), path (N, 2))`` towards the best reachable frontier, or None.
+
+        ``last_reason`` tells why there is no goal: ``"no map"`` (non-finite pose, malformed grid, robot
+        outside the grid or nothing observed yet: not a reason to stop exploring), ``"no frontier"`` or
+        ``"no reachable frontier"`` (exploration done, as far as this map tells).
+        """
+        self.last_reason = ""
         robot = np.array([T_map_base.x, T_map_base.y], dtype=np.float64)
-        if not np.isfinite(robot).all():
+        data_all = np.asarray(grid.data)
+        if not np.isfinite(robot).all() or data_all.ndim != 2 or not (data_all >= 0).any():
+            self.last_reason = "no map"
             return None
         cm = self._costmap(grid, robot)
         data = np.asarray(grid.data)[cm.row0 : cm.row0 + cm.shape[0], cm.col0 : cm.col0 + cm.shape[1]]
@@ -154,7 +162,11 @@ class FrontierExplorer:
         )
         self.frontiers = frontiers_from_labels(grid, labels, n, cm.row0, cm.col0)
         s_cell = cm.to_cells(robot[None])[0]
-        if n == 0 or not cm.in_bounds(s_cell[None])[0]:
+        if not cm.in_bounds(s_cell[None])[0]:
+            self.last_reason = "no map"
+            return None
+        if n == 0:
+            self.last_reason = "no frontier"
             self._note_abandoned(self.goal_xy)
             return self._clear()
         start = (int(s_cell[0]), int(s_cell[1]))
@@ -198,6 +210,7 @@ class FrontierExplorer:
         ok = ~self._blacklisted(xy)
         rows, cols, xy = rows[ok], cols[ok], xy[ok]
         if rows.size == 0 and keep is None:
+            self.last_reason = "no reachable frontier"
             self._note_abandoned(prev)
             return self._clear()
         if rows.size:
@@ -408,10 +421,15 @@ class ExplorationController:
             self._last_map_key = map_key
             self._last_plan_t = now
             old_goal = self.explorer.goal_xy
-            result = self.explorer.next_goal(grid, T_map_base)
+            try:
+                result = self.explorer.next_goal(grid, T_map_base)
+            except ValueError as e:  # a malformed grid: wait for the next one
+                self.explorer.last_reason = f"no map ({e})"
+                result = None
             if result is None:
                 self.follower.clear()
-                self._none_count += 1
+                if not self.explorer.last_reason.startswith("no map"):
+                    self._none_count += 1
                 if self._none_count >= self.done_confirmations:
                     self.status = "done"
                 return Twist()

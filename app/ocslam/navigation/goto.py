@@ -127,7 +127,11 @@ class GoToController:
         if need and self.follower.status != ARRIVED:
             self._last_map_key = map_key
             self._last_plan_t = now
-            ok = self._plan(grid, T_map_base)
+            try:
+                ok = self._plan(grid, T_map_base)
+            except ValueError:  # a malformed grid or pose: count it like a failed plan
+                self._plan_failures += 1
+                ok = False
             if not ok and (self.follower.path is None or self._plan_failures >= self.max_plan_failures):
                 self.status = "failed"
                 self.follower.clear()

@@ -289,3 +289,6 @@ class ConsciousnessConfig:
     stationary_frame_s: float = param(
         1.0, min=0.0, max=60.0, step=0.1, unit="s", help="improved: while the robot stands still, count a new frame after this time", live=True
     )
+    edge_margin_px: float = param(
+        8.0, min=0.0, max=100.0, step=1.0, unit="px", help="improved: a box this close to the image border is cut by it", live=True
+    )

@@ -44,6 +44,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import shapely
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
 from app.ocslam.classes import ClassPrior, prior
@@ -87,6 +88,7 @@ class Candidate:
     ground_center: FloatArray | None = None
     apparent_width: float = float("nan")  # the box's width at the island's range (m), NaN if cut by the border
     support: bool | None = None  # legged classes: one small island on the centre line (a pedestal)
+    legs: bool = False  # legged classes: every chosen island is leg-sized
     track_id: int | None = None
     status: str = "new"  # new | created | updated | collision
 
@@ -151,6 +153,12 @@ class _Track:
     detections: int = 1
     touched_stamp: float = -math.inf
     near_range: float = math.inf  # this frame's projection distance (collision rule)
+    complete_views: int = 0  # observations through boxes not cut by the image border
+
+    @property
+    def partial_only(self) -> bool:
+        """Only ever seen through boxes cut by the image border: possibly a fragment of a larger object."""
+        return self.complete_views == 0
 
     @property
     def prior(self) -> ClassPrior:
@@ -172,6 +180,25 @@ def _overlap_fraction(a: Footprint, b: Footprint) -> float:
     inter = shapely.area(shapely.intersection(pa, pb))
     small = max(min(pa.area, pb.area), 1e-9)
     return float(inter / small)
+
+
+def _min_distance(a: FloatArray, b: FloatArray) -> float:
+    """Smallest distance between two ``(N, 2)`` / ``(M, 2)`` point sets (inf if either is empty)."""
+    if len(a) == 0 or len(b) == 0:
+        return math.inf
+    return float(cKDTree(b).query(a, k=1)[0].min())
+
+
+def _contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typical: bool = False) -> bool:
+    """True if two point sets lie within ``gap_m`` and together fit one object of the class (one of
+    its typical shapes with ``typical``)."""
+    if len(a) == 0 or len(b) == 0 or _min_distance(a, b) > gap_m:
+        return False
+    _th, lo, hi = min_area_rect(np.vstack([a, b]))
+    d = hi - lo
+    if typical:
+        return pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.15)
+    return pc.fits(float(d[0]), float(d[1]), tolerance=0.1)
 
 
 class Consciousness:
@@ -475,7 +502,7 @@ class Consciousness:
         )
         boxes = self._valid_boxes(detections, rep)
         det_ok = Detections(detections.stamp, detections.image_width, detections.image_height, tuple(boxes))
-        areas = bounding_areas(det_ok, cam, max_r, float(cfg.bottom_margin_px))
+        areas = bounding_areas(det_ok, cam, max_r, float(cfg.bottom_margin_px), float(cfg.edge_margin_px))
         rep.areas = areas
         if len(areas) < len(boxes):
             rep.reject("bad_box", len(boxes) - len(areas))
@@ -614,11 +641,10 @@ class Consciousness:
                 app = 2.0 * float(r_pts.min()) * math.tan(area.half_angle)
             ev = ObjectEvidence()
             ev.add_points(pts_map)
-            ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app)
-            if ray_w == 0.0:
-                # viewpoint only; the per-frame estimate still needs a direction hint
-                ev.ray_weight[-1] = 0.2
+            ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app)  # a box cut by the border: a viewpoint only
             support = None
+            legs = pc.legged and all(islands[g].extent <= pc.leg_size_max for g in group)
+            ev.observations, ev.leg_obs = 1, int(legs)
             if pc.legged:
                 off = area.angular_offsets(islands[best].centroid[None, :])[0]
                 support = (
@@ -645,6 +671,7 @@ class Consciousness:
                     ray_weight=ray_w,
                     apparent_width=app,
                     support=support,
+                    legs=legs,
                 ),
                 islands,
             )
@@ -794,6 +821,7 @@ class Consciousness:
         thr = float(self.cfg.tracking_threshold_m)
         best, best_d = None, math.inf
         c = cand.center
+        partial = cand.ray_weight == 0.0
         for t in self._tracks:
             if t.label != cand.label or t.footprint is None:
                 continue
@@ -803,6 +831,11 @@ class Consciousness:
                 match = float(np.mean(t.footprint.contains(cand.points, margin=0.5 * thr))) >= 0.5
             if not match and cand.footprint is not None:
                 match = bool(cand.footprint.contains(t.footprint.center[None, :])[0])
+            if not match and (partial or t.partial_only) and len(cand.points):
+                # a partial view of a large object: its points continue the object's
+                match = _contiguous(cand.points, t.evidence.points, t.prior, thr)
+                if match:
+                    d = thr + float(_min_distance(cand.points, t.evidence.points))
             if match and d < best_d:
                 best, best_d = t, d
         return best
@@ -824,6 +857,7 @@ class Consciousness:
             touched_stamp=stamp,
         )
         self._next_id += 1
+        t.complete_views = int(cand.ray_weight > 0.0)
         t.refresh()
         if t.footprint is None:
             t.footprint = cand.footprint
@@ -834,6 +868,8 @@ class Consciousness:
         w = float(self.cfg.rolling_average_weight)
         if len(cand.points):
             ev.add_points(cand.points, kf)
+            ev.observations += 1
+            ev.leg_obs += int(cand.legs)
             if cand.support is True:
                 ev.support_obs += 1
             elif cand.support is False:
@@ -864,6 +900,7 @@ class Consciousness:
         t.touched_stamp = stamp
         t.confidence = cand.confidence
         t.detections += 1
+        t.complete_views += int(cand.ray_weight > 0.0)
         t.last_seen = stamp
         t.refresh()
         return consistent
@@ -884,14 +921,17 @@ class Consciousness:
                     continue
                 frac = _overlap_fraction(a.footprint, b.footprint)
                 if a.label == b.label:
-                    if d < thr or frac >= ov:
+                    same = d < thr or frac >= ov
+                    if not same and (a.partial_only or b.partial_only):
+                        # fragments of one large object seen only in parts: they touch (or, if both are
+                        # partial views, lie close) and together fit one object of the class
+                        if a.partial_only and b.partial_only:
+                            same = _contiguous(a.evidence.points, b.evidence.points, a.prior, a.prior.length[2], typical=True)
+                        else:
+                            same = _contiguous(a.evidence.points, b.evidence.points, a.prior, thr)
+                    if same:
                         keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
-                        keep.evidence.absorb(drop.evidence)
-                        keep.presence = max(keep.presence, drop.presence)
-                        keep.frames = max(keep.frames, drop.frames)
-                        keep.detections += drop.detections
-                        keep.last_seen = max(keep.last_seen, drop.last_seen)
-                        keep.refresh()
+                        self._merge_tracks(keep, drop)
                         removed.add(drop.id)
                         rep.merged += 1
                         if drop is a:
@@ -911,6 +951,22 @@ class Consciousness:
                         break
         if removed:
             self._tracks = [t for t in self._tracks if t.id not in removed]
+
+    def _merge_tracks(self, keep: _Track, drop: _Track) -> None:
+        """``keep`` absorbs ``drop`` (same object): evidence united, frames added (they were seen in
+        different frames), presence re-evaluated with the soft decision."""
+        F = max(int(self.cfg.frames_for_presence), 1)
+        keep.evidence.absorb(drop.evidence)
+        frames = min(F, keep.frames + drop.frames)
+        conf = min(keep.confidence, drop.confidence)
+        keep.presence = max(keep.presence, drop.presence, min(conf, 1.0) * frames / F)
+        keep.frames = frames
+        keep.detections += drop.detections
+        keep.complete_views += drop.complete_views
+        keep.last_seen = max(keep.last_seen, drop.last_seen)
+        keep.last_frame_stamp = max(keep.last_frame_stamp, drop.last_frame_stamp)
+        keep.created = min(keep.created, drop.created)
+        keep.refresh()
 
     def _decay(
         self,

@@ -21,9 +21,10 @@ from dataclasses import dataclass
 
 import math
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
-from shapely.geometry import MultiPoint, Polygon
+from shapely.geometry import Polygon
 
 from app.ocslam.classes import ClassPrior
 from app.ocslam.se2 import Pose2
@@ -80,41 +81,53 @@ class Footprint:
         return Footprint(c, float(self.yaw + T.yaw), self.size_x, self.size_y)
 
 
-def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
-    """Enclosing rectangle of ``(N, 2)`` points aligned with their dominant edge direction.
+def _hull_angles(p: FloatArray) -> FloatArray:
+    """Orientations (mod 90°) of the convex hull's edges of ``(N, 2)`` points (N ≥ 3)."""
+    hull = cv2.convexHull(p.astype(np.float32)).reshape(-1, 2).astype(np.float64)
+    if len(hull) < 2:
+        return np.array([0.0])
+    e = np.roll(hull, -1, axis=0) - hull
+    e = e[np.hypot(e[:, 0], e[:, 1]) > 1e-6]
+    if len(e) == 0:
+        return np.array([0.0])
+    return np.unique(np.round(np.arctan2(e[:, 1], e[:, 0]) % (np.pi / 2), 9))
 
-    The orientation is the convex-hull edge direction (modulo 90°) backed by the greatest total edge
-    length within ±5°, so the two sides of an L (three legs of a table, two faces of a sofa) win over
-    the diagonal that a pure minimum-area rectangle may pick; ties go to the smaller area.
-    Returns ``(theta, lo (2,), hi (2,))``: the first axis angle and the points' extents along
-    ``e1 = (cos θ, sin θ)`` and ``e2 = (−sin θ, cos θ)``.
+
+def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
+    """Enclosing rectangle of ``(N, 2)`` boundary points, oriented by the closeness criterion.
+
+    Candidate orientations are the convex hull's edge directions (so the result turns with the points).
+    The LIDAR sees an object's outline, so its points lie on the rectangle's sides: the orientation
+    that brings the points closest to their nearest side wins (Zhang et al., "Efficient L-shape
+    fitting for vehicle detection using laser scanners", 2017): score = Σ 1 / max(d_i, 1 cm). Unlike
+    a minimum-area rectangle it is not fooled by the diagonal of an L (three legs of a table, two
+    faces of an armchair). Clusters smaller than 0.5 m (a pair of legs, a curved surface) take the
+    minimum-area orientation instead. Returns ``(theta, lo (2,), hi (2,))``: the first axis angle and
+    the points' extents along ``e1 = (cos θ, sin θ)`` and ``e2 = (−sin θ, cos θ)``.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    hull = MultiPoint(p).convex_hull
-    if isinstance(hull, Polygon):
-        ring = np.asarray(hull.exterior.coords)
-        edges = np.diff(ring, axis=0)
-        thetas = np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2)
-        lengths = np.hypot(edges[:, 0], edges[:, 1])
-        hp = ring[:-1]
-    elif hull.geom_type == "LineString":
-        ring = np.asarray(hull.coords)
-        d = ring[-1] - ring[0]
-        thetas = np.array([np.arctan2(d[1], d[0]) % (np.pi / 2)])
-        lengths = np.array([1.0])
-        hp = ring
+    if len(p) >= 3:
+        c = p.mean(axis=0)
+        q = p - c
+        thetas = _hull_angles(q)
+        cs, sn = np.cos(thetas), np.sin(thetas)
+        a = q[:, 0][None, :] * cs[:, None] + q[:, 1][None, :] * sn[:, None]  # (K, N)
+        b = -q[:, 0][None, :] * sn[:, None] + q[:, 1][None, :] * cs[:, None]
+        area = (a.max(1) - a.min(1)) * (b.max(1) - b.min(1))
+        if np.ptp(q, axis=0).max() < 0.5:
+            # a small cluster: the outline says little, the minimum-area rectangle follows its line
+            th = float(thetas[int(np.argmin(area))])
+        else:
+            da = np.minimum(a - a.min(axis=1, keepdims=True), a.max(axis=1, keepdims=True) - a)
+            db = np.minimum(b - b.min(axis=1, keepdims=True), b.max(axis=1, keepdims=True) - b)
+            score = (1.0 / np.maximum(np.minimum(da, db), 0.01)).sum(axis=1)
+            best = np.flatnonzero(score >= score.max() * (1.0 - 1e-6))  # ties: the smaller area
+            th = float(thetas[best[np.argmin(area[best])]])
+    elif len(p) == 2:
+        d = p[1] - p[0]
+        th = float(np.arctan2(d[1], d[0]) % (np.pi / 2))
     else:
-        thetas, lengths, hp = np.array([0.0]), np.array([1.0]), p[:1]
-    diff = np.abs(thetas[:, None] - thetas[None, :])
-    diff = np.minimum(diff, np.pi / 2 - diff)
-    support = (diff <= np.deg2rad(5.0)).astype(np.float64) @ lengths
-    c, s = np.cos(thetas), np.sin(thetas)
-    a = hp[None, :, 0] * c[:, None] + hp[None, :, 1] * s[:, None]
-    b = -hp[None, :, 0] * s[:, None] + hp[None, :, 1] * c[:, None]
-    areas = (a.max(1) - a.min(1)) * (b.max(1) - b.min(1))
-    best = np.flatnonzero(support >= support.max() - 1e-9)
-    k = int(best[np.argmin(areas[best])])
-    th = float(thetas[k])
+        th = 0.0
     c, s = np.cos(th), np.sin(th)
     a = p[:, 0] * c + p[:, 1] * s
     b = -p[:, 0] * s + p[:, 1] * c
@@ -165,6 +178,9 @@ class ObjectEvidence:
         #: legged classes: observations as one small island on the box's centre line vs. off it / several legs
         self.support_obs = 0
         self.corner_obs = 0
+        #: observations with points, and those whose points were all leg-sized islands (legged classes)
+        self.observations = 0
+        self.leg_obs = 0
 
     # -- accumulation ----------------------------------------------------------------------------
     @property
@@ -182,7 +198,8 @@ class ObjectEvidence:
         pos = np.vstack([self.points, p]) if len(self.points) else p
         kfs = np.concatenate([self.point_kf, np.full(len(p), kf, dtype=np.int64)])
         keys = np.floor(pos / self.voxel_m).astype(np.int64)
-        _, inv = np.unique(keys, axis=0, return_inverse=True)
+        key1 = (keys[:, 0] + (1 << 31)) * (1 << 32) + (keys[:, 1] + (1 << 31))
+        _, inv = np.unique(key1, return_inverse=True)
         inv = inv.reshape(-1)
         n = int(inv.max()) + 1
         wsum = np.bincount(inv, weights=w, minlength=n)
@@ -253,6 +270,8 @@ class ObjectEvidence:
             self.add_ray(o, d, float(w), int(k), apparent_width=float(a))
         self.support_obs += other.support_obs
         self.corner_obs += other.corner_obs
+        self.observations += other.observations
+        self.leg_obs += other.leg_obs
         if other.gp_center is not None:
             if self.gp_center is None:
                 self.gp_center, self.gp_kf = other.gp_center.copy(), other.gp_kf
@@ -297,6 +316,8 @@ class ObjectEvidence:
             "gp_kf": self.gp_kf,
             "support_obs": self.support_obs,
             "corner_obs": self.corner_obs,
+            "observations": self.observations,
+            "leg_obs": self.leg_obs,
         }
 
     @staticmethod
@@ -320,6 +341,8 @@ class ObjectEvidence:
         e.gp_kf = int(d.get("gp_kf", NO_KEYFRAME))
         e.support_obs = int(d.get("support_obs", 0))
         e.corner_obs = int(d.get("corner_obs", 0))
+        e.observations = int(d.get("observations", 0))
+        e.leg_obs = int(d.get("leg_obs", 0))
         if not (len(e.points) == len(e.hits) == len(e.point_kf)) or not (
             len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app)
         ):
@@ -342,14 +365,15 @@ def _one_sided(viewpoints: FloatArray, center: FloatArray, axis: FloatArray, hal
     return 0
 
 
-def depth_for_width(width: float, pc: ClassPrior) -> tuple[float, float, float]:
+def depth_for_width(width: float, pc: ClassPrior, legs: bool = False) -> tuple[float, float, float]:
     """``(nominal, min, max)`` depth of an object of class ``pc`` whose visible face is ``width`` wide.
 
-    Matches the face against the sides of the class's typical footprints (each within ±30 % scale);
-    without a match, the class's width range (a face wider than any width is a length).
+    Matches the face against the sides of the class's typical footprints (each within ±30 % scale) —
+    of its legs' footprints when the face is made of legs; without a match, the class's width range
+    (a face wider than any width is a length).
     """
     best: tuple[float, float] | None = None
-    for a, b in pc.shapes:
+    for a, b in (pc.leg_shapes if legs and pc.leg_shapes else pc.shapes):
         for face, other in ((a, b), (b, a)):
             sc = width / face
             if 0.7 <= sc <= 1.3:
@@ -399,9 +423,14 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
     side = [_one_sided(views, center0, axes[i], d_obs[i] / 2) for i in range(2)]
     depth_axis = -1
     if len(views):
-        u = center0[None, :] - views
-        u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
-        depth_axis = int(np.argmax(np.abs(u @ axes.T).mean(axis=0)))
+        long_ax = int(np.argmax(d_obs))
+        if d_obs[long_ax] >= 0.15 and d_obs[1 - long_ax] <= 0.35 * d_obs[long_ax]:
+            # one face (a line of points), even seen obliquely: its normal is the depth axis
+            depth_axis = 1 - long_ax
+        else:
+            u = center0[None, :] - views
+            u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
+            depth_axis = int(np.argmax(np.abs(u @ axes.T).mean(axis=0)))
     tan_axis = 1 - depth_axis if depth_axis >= 0 else -1
 
     w_app = float("nan")
@@ -428,7 +457,8 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
         t_tan = float(np.clip(w_app, max(d_obs[tan_axis], W[0]), L[2]))
     else:
         t_tan = float(max(d_obs[tan_axis], L[1] if d_obs[tan_axis] > W[2] else W[1]))
-    dep_nom, dep_min, dep_max = depth_for_width(t_tan, pc)
+    legs = pc.legged and ev.leg_obs * 2 > ev.observations
+    dep_nom, dep_min, dep_max = depth_for_width(t_tan, pc, legs)
     tan_max = L[2] if t_tan > W[2] else max(L[2], W[2])
 
     s_lo, s_hi, s_prior, size, lam = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.ones(2)

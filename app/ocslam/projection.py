@@ -342,7 +342,7 @@ def area_from_box(
     camera: CameraModel,
     max_range_m: float,
     bottom_margin_px: float = 6.0,
-    edge_margin_px: float = 2.0,
+    edge_margin_px: float = 8.0,
 ) -> BoundingArea | None:
     """The improved bounding area of one box in the camera's pixel grid (see module docstring).
 
@@ -398,7 +398,7 @@ def bounding_areas(
     camera: CameraModel,
     max_range_m: float,
     bottom_margin_px: float = 6.0,
-    edge_margin_px: float = 2.0,
+    edge_margin_px: float = 8.0,
 ) -> list[BoundingArea]:
     """Improved bounding areas of all boxes (``base_scan``); degenerate boxes are skipped.
 

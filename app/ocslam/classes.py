@@ -66,12 +66,15 @@ class ClassPrior:
         big, small = max(extent_a, extent_b), min(extent_a, extent_b)
         return any(big <= a * (1.0 + tolerance) and small <= b * (1.0 + tolerance) + 0.05 for a, b in self.shapes)
 
-    def legs_fit(self, extent_a: float, extent_b: float, tolerance: float = 0.1) -> bool:
-        """True if a group of leg islands with these extents fits the legs of one instance."""
+    def legs_fit(self, extent_a: float, extent_b: float, tolerance: float = 0.3) -> bool:
+        """True if a group of leg islands with these extents fits the legs of one typical instance
+        (one of ``leg_shapes`` scaled by 1 + ``tolerance``, never beyond ``leg_span``)."""
         if self.leg_span is None:
             return False
         big, small = max(extent_a, extent_b), min(extent_a, extent_b)
-        return big <= self.leg_span[0] * (1.0 + tolerance) and small <= self.leg_span[1] * (1.0 + tolerance)
+        if big > self.leg_span[0] or small > self.leg_span[1]:
+            return False
+        return any(big <= a * (1.0 + tolerance) + 0.05 and small <= b * (1.0 + tolerance) + 0.05 for a, b in self.leg_shapes)
 
     # -- derived extents ---------------------------------------------------------------------------
     @property
@@ -116,7 +119,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("gnome", (0.14, 0.3, 0.45), (0.12, 0.25, 0.4), (0.3, 0.94, 1.2), solid_fraction=0.3),
         ClassPrior(
             "table", (0.7, 1.8, 2.3), (0.45, 1.0, 1.35), (0.45, 0.74, 1.0),
-            legged=True, leg_size_max=0.3, shapes=((1.8, 1.0), (1.0, 1.0)), leg_span=(2.3, 1.35),
+            legged=True, leg_size_max=0.25, shapes=((1.8, 1.0), (1.0, 1.0)), leg_span=(2.3, 1.35),
         ),
         ClassPrior(
             "chair", (0.35, 1.1, 2.7), (0.3, 1.0, 1.3), (0.45, 0.8, 1.3), solid_fraction=0.4,
@@ -130,7 +133,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.075, 0.16), (0.05, 0.1, 0.16)),
         ClassPrior(
             "person", (0.25, 0.6, 0.85), (0.15, 0.3, 0.55), (1.2, 1.8, 2.3),
-            legged=True, leg_size_max=0.3, leg_span=(0.6, 0.4), leg_shapes=((0.37, 0.14),),
+            legged=True, leg_size_max=0.2, leg_span=(0.6, 0.4), leg_shapes=((0.37, 0.14),),
         ),
         ClassPrior("extinguisher", (0.1, 0.23, 0.4), (0.08, 0.18, 0.35), (0.3, 0.77, 1.0), solid_fraction=0.3),
         ClassPrior("flowers", (0.12, 0.25, 0.7), (0.12, 0.19, 0.7), (0.35, 0.99, 1.4), solid_fraction=0.1),

@@ -627,8 +627,11 @@ class Consciousness:
             passing.append((i, ang / half, r_front))
 
         if passing:
+            # nearest the bisector; ties to the nearer island. A legged object's box centre looks
+            # between its legs at the background, so for legged classes the range counts more.
             r_min = min(p[2] for p in passing)
-            costs = [c + 0.25 * (r - r_min) / max(r_min, 0.3) for (_, c, r) in passing]
+            w_range = 2.0 if pc.legged else 0.25
+            costs = [c + w_range * (r - r_min) / max(r_min, 0.3) for (_, c, r) in passing]
             best = passing[int(np.argmin(costs))][0]
             group = [best]
             if cfg.legs and pc.legged and islands[best].extent <= pc.leg_size_max:
@@ -886,7 +889,7 @@ class Consciousness:
         if len(cand.points) and t.evidence.has_points:
             _th, lo, hi = min_area_rect(np.vstack([t.evidence.points, cand.points]))
             d = hi - lo
-            if not pc.fits(float(d[0]), float(d[1]), tolerance=0.3):
+            if not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
                 # the union would not fit one object of this class: keep the track's shape, use the ray only
                 cand = dataclasses.replace(cand, points=np.zeros((0, 2)), ground_center=None)
                 consistent = False

@@ -146,8 +146,9 @@ class OcslamApp:
             for c in self.server.get_clients().values():
                 try:
                     off = np.asarray(c.camera.position) - np.asarray(c.camera.look_at)
-                    c.camera.look_at = (T.x, T.y, 0.0)
+                    # viser keeps the viewing direction when the position is set: position first
                     c.camera.position = (T.x + off[0], T.y + off[1], off[2])
+                    c.camera.look_at = (T.x, T.y, 0.0)
                 except Exception:
                     pass
 
@@ -275,16 +276,16 @@ class OcslamApp:
         for cl in self._clients(client):
             if hasattr(cl.camera, "up_direction"):
                 cl.camera.up_direction = (0.0, 1.0, 0.0)
-            cl.camera.look_at = (float(c[0]), float(c[1]), 0.0)
             cl.camera.position = (float(c[0]), float(c[1]) - 0.01, float(max(size, 4.0) * 1.1))
+            cl.camera.look_at = (float(c[0]), float(c[1]), 0.0)
 
     def focus_object(self, object_id: int, client: Any = None) -> None:
         for o in self.pipeline.consciousness.objects:
             if o.id == object_id:
                 T = self.layers._object_pose_map(o)
                 for cl in self._clients(client):
-                    cl.camera.look_at = (T.x, T.y, 0.2)
                     cl.camera.position = (T.x - 1.2, T.y - 1.2, 1.4)
+                    cl.camera.look_at = (T.x, T.y, 0.2)
                 return
 
     def _world_bounds_map(self) -> tuple[np.ndarray, float]:

@@ -204,7 +204,6 @@ class SceneLayers:
         self._truth_built = False
         for nodes in self._objects.values():
             nodes.footprint.remove()
-            nodes.label.remove()
         self._objects.clear()
         self._grid_stamp = -1.0
 
@@ -343,9 +342,7 @@ class SceneLayers:
                 nodes.last_text = text
         for oid in list(self._objects):
             if oid not in seen:
-                nodes = self._objects.pop(oid)
-                nodes.footprint.remove()
-                nodes.label.remove()
+                self._objects.pop(oid).footprint.remove()  # its label is a child node: removed with it
 
     def _update_truth(self) -> None:
         p = self.pipeline

@@ -244,6 +244,17 @@ class Pipeline:
     def _on_reset(self) -> None:
         self.restart_odometry(Pose2())
 
+    def restart_clock(self, t: float) -> None:
+        """Continue from sim time ``t`` (a restored session): estimators reject stamps going backwards."""
+        if self.camera_worker is not None:
+            while self.camera_worker.pending:
+                self.camera_worker.collect()
+        self.sim.set_time(t)
+        now = self.sim.time
+        self._next_odom = self._next_scan = now
+        self._next_image = now + 0.5 / self.cfg.lidar.rate_hz
+        self._next_control = now
+
     def restart_odometry(self, T_odom_base: Pose2) -> None:
         """Restart the wheel odometry at ``T_odom_base`` from the current encoder reading."""
         self.odometry.reset(T_odom_base)

@@ -86,70 +86,46 @@ def _npz_bytes(**arrays: Any) -> bytes:
     return buf.getvalue()
 
 
-def _flatten(prefix: str, d: Any, out: dict[str, Any]) -> None:
-    """Nested dict/list of arrays/scalars → flat npz-able dict (keys joined with '/')."""
-    if isinstance(d, dict):
-        for k, v in d.items():
-            _flatten(f"{prefix}/{k}" if prefix else str(k), v, out)
-    elif isinstance(d, (list, tuple)) and d and all(isinstance(v, dict) for v in d):
-        out[f"{prefix}#len"] = np.array(len(d))
-        for i, v in enumerate(d):
-            _flatten(f"{prefix}#{i}", v, out)
-    else:
-        arr = np.asarray(d)
-        if arr.dtype == object:
-            arr = np.array(json.dumps(d, default=_json_default))
-            prefix = prefix + "#json"
-        out[prefix] = arr
+def pack_state(tree: Any) -> dict[str, np.ndarray]:
+    """A nested state (dicts, lists, scalars, strings, numpy arrays) → arrays for ``np.savez``:
+    every array is stored under its own key and replaced by ``{"__array__": key}`` in a JSON tree
+    kept under ``"__tree__"``. Loads without pickle."""
+    arrays: dict[str, np.ndarray] = {}
+
+    def walk(x: Any) -> Any:
+        if isinstance(x, np.ndarray):
+            key = f"a{len(arrays)}"
+            arrays[key] = x
+            return {"__array__": key}
+        if isinstance(x, dict):
+            return {str(k): walk(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [walk(v) for v in x]
+        if isinstance(x, np.generic):
+            return x.item()
+        if isinstance(x, Pose2):
+            return [x.x, x.y, x.yaw]
+        return x
+
+    tree_json = json.dumps(walk(tree))
+    arrays["__tree__"] = np.array(tree_json)
+    return arrays
 
 
-def _unflatten(flat: dict[str, np.ndarray]) -> dict[str, Any]:
-    root: dict[str, Any] = {}
-    lists: dict[str, int] = {}
-    for key in sorted(flat):
-        if key.endswith("#len"):
-            lists[key[:-4]] = int(flat[key])
-    for key, arr in flat.items():
-        if key.endswith("#len"):
-            continue
-        value: Any = arr
-        if key.endswith("#json"):
-            key = key[:-5]
-            value = json.loads(str(arr))
-        elif arr.ndim == 0:
-            value = arr.item()
-        parts = key.split("/")
-        node = root
-        for part in parts[:-1]:
-            node = node.setdefault(part, {})
-        node[parts[-1]] = value
+def unpack_state(arrays: dict[str, np.ndarray]) -> Any:
+    """Inverse of :func:`pack_state`."""
+    tree = json.loads(str(arrays["__tree__"]))
 
-    def fix(node: Any) -> Any:
-        if not isinstance(node, dict):
-            return node
-        keys = list(node)
-        out: dict[str, Any] = {}
-        for k in keys:
-            out[k] = fix(node[k])
-        # rebuild lists named "name#i"
-        listed: dict[str, dict[int, Any]] = {}
-        for k in list(out):
-            if "#" in k:
-                base, _, idx = k.rpartition("#")
-                if idx.isdigit():
-                    listed.setdefault(base, {})[int(idx)] = out.pop(k)
-        for base, items in listed.items():
-            out[base] = [items[i] for i in sorted(items)]
-        return out
+    def walk(x: Any) -> Any:
+        if isinstance(x, dict):
+            if set(x) == {"__array__"}:
+                return np.asarray(arrays[x["__array__"]])
+            return {k: walk(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [walk(v) for v in x]
+        return x
 
-    res = fix(root)
-    for name, n in lists.items():  # empty lists
-        node = res
-        parts = name.split("/")
-        for part in parts[:-1]:
-            node = node.setdefault(part, {})
-        node.setdefault(parts[-1], [])
-    return res
+    return walk(tree)
 
 
 def _json_default(o: Any) -> Any:
@@ -181,10 +157,7 @@ def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] |
         s = np.array([t for t, _, _ in pipe.truth_log])
         o = np.array([p.as_array() for _, _, p in pipe.truth_log])
         atomic_write_text(out / "trajectory_odom.tum", tum_lines(s, o))
-    state = session_state(pipe)
-    flat: dict[str, Any] = {}
-    _flatten("", state, flat)
-    atomic_write_bytes(out / "state.npz", _npz_bytes(**flat))
+    atomic_write_bytes(out / "state.npz", _npz_bytes(**pack_state(session_state(pipe))))
     try:
         write_recording(pipe, out)
     except Exception as e:  # the recording is a convenience; never lose the rest for it
@@ -215,7 +188,7 @@ def load_session(pipe: "Pipeline", path: str | Path) -> None:
         raise FileNotFoundError(f"{path} is not a session directory (no state.npz); save one with 'Save session'")
     try:
         with np.load(f, allow_pickle=False) as z:
-            state = _unflatten({k: z[k] for k in z.files})
+            state = unpack_state({k: z[k] for k in z.files})
     except Exception as e:
         raise ValueError(f"{f}: unreadable session state ({e})") from None
     if int(state.get("version", 0)) != SESSION_VERSION:
@@ -223,6 +196,7 @@ def load_session(pipe: "Pipeline", path: str | Path) -> None:
     slam = Slam.from_state_dict(pipe.cfg.slam, state["slam"])
     cons = Consciousness.from_state_dict(state["consciousness"], pipe.cfg.consciousness, pipe.camera_model)
     pipe.sim.set_robot_pose(Pose2.from_array(state["T_world_base_true"]))
+    pipe.restart_clock(float(state["sim_time"]))
     pipe.slam = slam
     pipe.consciousness = cons
     pipe._slam_corrections = slam.correction_count

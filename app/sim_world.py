@@ -249,6 +249,11 @@ class SimWorld:
         """Ground truth ``T_world_base`` (``base_footprint`` in the world frame)."""
         return Pose2(float(self._pose[0]), float(self._pose[1]), float(wrap_angle(self._pose[2])))
 
+    def set_time(self, t: float) -> None:
+        """Set the sim clock (restoring a session), rounded to whole physics steps."""
+        self._steps = max(0, int(round(float(t) / self.dt)))
+        self.time = self._steps * self.dt
+
     def set_robot_pose(self, T_world_base: Pose2) -> None:
         """Teleport the robot (no collision check; motion state kept, stall cleared)."""
         self._pose = np.array([T_world_base.x, T_world_base.y, T_world_base.yaw], dtype=np.float64)

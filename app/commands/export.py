@@ -45,15 +45,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _state(session: Path) -> dict:
-    from app.session import _unflatten
-
     import numpy as np
+
+    from app.session import unpack_state
 
     f = session / "state.npz"
     if not f.is_file():
         raise FileNotFoundError(f"{session} is not a session directory (no state.npz)")
     with np.load(f, allow_pickle=False) as z:
-        return _unflatten({k: z[k] for k in z.files})
+        return unpack_state({k: z[k] for k in z.files})
 
 
 def _config(session: Path) -> Config:

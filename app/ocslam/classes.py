@@ -46,6 +46,9 @@ class ClassPrior:
     leg_span: tuple[float, float] | None = None
     #: typical ``(long, short)`` footprints of the legs alone (legs at the corners: the same as ``shapes``)
     leg_shapes: tuple[tuple[float, float], ...] = ()
+    #: largest island one instance can give at LIDAR height (m, bounding-box diagonal; inf: no limit).
+    #: Classes that are legs at that height (tables, dogs, people) never give a wall-sized island.
+    max_island: float = float("inf")
 
     def __post_init__(self) -> None:
         for key in ("length", "width", "height"):
@@ -64,7 +67,7 @@ class ClassPrior:
     def fits_typical(self, extent_a: float, extent_b: float, tolerance: float = 0.2) -> bool:
         """True if a footprint with these extents fits inside one of the typical shapes (scaled by 1 + tol)."""
         big, small = max(extent_a, extent_b), min(extent_a, extent_b)
-        return any(big <= a * (1.0 + tolerance) and small <= b * (1.0 + tolerance) + 0.05 for a, b in self.shapes)
+        return any(big <= a * (1.0 + tolerance) + 0.1 and small <= b * (1.0 + tolerance) + 0.1 for a, b in self.shapes)
 
     def legs_fit(self, extent_a: float, extent_b: float, tolerance: float = 0.3) -> bool:
         """True if a group of leg islands with these extents fits the legs of one typical instance
@@ -114,12 +117,12 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("ball", (0.14, 0.225, 0.32), (0.14, 0.225, 0.32), (0.14, 0.225, 0.34), solid_fraction=0.5),
         ClassPrior(
             "dog", (0.45, 1.0, 1.4), (0.15, 0.27, 0.55), (0.35, 0.74, 1.0),
-            legged=True, leg_size_max=0.35, leg_span=(0.8, 0.45), leg_shapes=((0.54, 0.27),),
+            legged=True, leg_size_max=0.35, leg_span=(0.8, 0.45), leg_shapes=((0.54, 0.27),), max_island=0.5,
         ),
         ClassPrior("gnome", (0.14, 0.3, 0.45), (0.12, 0.25, 0.4), (0.3, 0.94, 1.2), solid_fraction=0.3),
         ClassPrior(
             "table", (0.7, 1.8, 2.3), (0.45, 1.0, 1.35), (0.45, 0.74, 1.0),
-            legged=True, leg_size_max=0.25, shapes=((1.8, 1.0), (1.0, 1.0)), leg_span=(2.3, 1.35),
+            legged=True, leg_size_max=0.25, shapes=((1.8, 1.0), (1.0, 1.0)), leg_span=(2.3, 1.35), max_island=0.45,
         ),
         ClassPrior(
             "chair", (0.35, 1.1, 2.7), (0.3, 1.0, 1.3), (0.45, 0.8, 1.3), solid_fraction=0.4,
@@ -133,7 +136,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.075, 0.16), (0.05, 0.1, 0.16)),
         ClassPrior(
             "person", (0.25, 0.6, 0.85), (0.15, 0.3, 0.55), (1.2, 1.8, 2.3),
-            legged=True, leg_size_max=0.2, leg_span=(0.6, 0.4), leg_shapes=((0.37, 0.14),),
+            legged=True, leg_size_max=0.2, leg_span=(0.6, 0.4), leg_shapes=((0.37, 0.14),), max_island=0.55,
         ),
         ClassPrior("extinguisher", (0.1, 0.23, 0.4), (0.08, 0.18, 0.35), (0.3, 0.77, 1.0), solid_fraction=0.3),
         ClassPrior("flowers", (0.12, 0.25, 0.7), (0.12, 0.19, 0.7), (0.35, 0.99, 1.4), solid_fraction=0.1),

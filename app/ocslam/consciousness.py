@@ -15,8 +15,9 @@ Per frame (improved):
 4. Checks per island (the *corner problem*): its range against the box's bottom edge
    (``corner_range``: in front of where the object meets the floor; ``behind``: background), its
    range against the box's pixel size for the class's physical size (``corner_size``/``size_far``),
-   and free space where a solid object of the class would have to be, from the current scan and
-   from the occupancy grid (``corner_free_space``).
+   whether the box reaches down to the island's row at the LIDAR's height (``corner_height``), and
+   free space where a solid object of the class would have to be, in the current scan
+   (``corner_see_through``) and in the occupancy grid (``corner_free_space``).
 5. The passing island nearest the bisector (angular distance, ties to the nearer) is the object;
    for legged classes the other leg-sized islands that fit the class's footprint join it (*legs*).
 6. No consistent island: classes that can be below the LIDAR plane are placed by ground-plane
@@ -50,7 +51,7 @@ from shapely.geometry import Polygon
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.footprint import NO_KEYFRAME, Footprint, ObjectEvidence, estimate_footprint, min_area_rect
-from app.ocslam.islands import Island, islands_linkage
+from app.ocslam.islands import Island, cluster_extents, islands_linkage
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
 from app.ocslam.presence import decay_presence, in_camera_view, initial_presence, occluded_by_scan, update_presence
 from app.ocslam.projection import (
@@ -89,6 +90,7 @@ class Candidate:
     apparent_width: float = float("nan")  # the box's width at the island's range (m), NaN if cut by the border
     support: bool | None = None  # legged classes: one small island on the centre line (a pedestal)
     legs: bool = False  # legged classes: every chosen island is leg-sized
+    open_side: int = 0  # +1/-1: the box is cut by the image's left/right border only
     track_id: int | None = None
     status: str = "new"  # new | created | updated | collision
 
@@ -197,8 +199,28 @@ def _contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typi
     _th, lo, hi = min_area_rect(np.vstack([a, b]))
     d = hi - lo
     if typical:
-        return pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.15)
+        return pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25)
     return pc.fits(float(d[0]), float(d[1]), tolerance=0.1)
+
+
+def _open_direction(ev: ObjectEvidence) -> FloatArray | None:
+    """Unit direction (object frame) in which an object seen through boxes cut by the image border
+    continues beyond that border; ``None`` without such views or when they disagree."""
+    m = ev.ray_open != 0
+    if not np.any(m):
+        return None
+    left = np.stack([-ev.ray_dir[m, 1], ev.ray_dir[m, 0]], axis=1) * ev.ray_open[m][:, None]
+    v = left.sum(axis=0)
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0.5 * m.sum() else None
+
+
+def _toward_open_side(frag: ObjectEvidence, frag_pts: FloatArray, other_pts: FloatArray) -> bool:
+    """True if ``other_pts`` lie on the side where the fragment continues beyond the image border."""
+    d = _open_direction(frag)
+    if d is None or len(frag_pts) == 0 or len(other_pts) == 0:
+        return True
+    return float((other_pts.mean(axis=0) - frag_pts.mean(axis=0)) @ d) > 0.0
 
 
 class Consciousness:
@@ -215,6 +237,7 @@ class Consciousness:
         self._last_pose: Pose2 | None = None
         self._last_stamp: float | None = None
         self.last_report: FrameReport | None = None
+        self._scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None] = (None, None)
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -502,12 +525,17 @@ class Consciousness:
         )
         boxes = self._valid_boxes(detections, rep)
         det_ok = Detections(detections.stamp, detections.image_width, detections.image_height, tuple(boxes))
-        areas = bounding_areas(det_ok, cam, max_r, float(cfg.bottom_margin_px), float(cfg.edge_margin_px))
+        areas = bounding_areas(
+            det_ok, cam, max_r, float(cfg.bottom_margin_px), float(cfg.edge_margin_px), float(cfg.range_tolerance)
+        )
         rep.areas = areas
         if len(areas) < len(boxes):
             rep.reject("bad_box", len(boxes) - len(areas))
         member = assign_points(pts_all, areas, exclusive=True, range_tolerance=float(cfg.range_tolerance))
 
+        # the whole scan's clusters: an island clipped by its area may belong to a wall
+        labels, extents = cluster_extents(pts_all, float(cfg.island_threshold_m)) if areas else (None, None)
+        self._scan_clusters = (labels, extents)
         candidates: list[Candidate | None] = []
         for k, area in enumerate(areas):
             idx = np.flatnonzero(member[:, k])
@@ -567,11 +595,17 @@ class Consciousness:
             ]
         )
         ray_w = 0.0 if (area.truncated["left"] or area.truncated["right"]) else 1.0
+        open_side = int(area.truncated["left"]) - int(area.truncated["right"])
         near = area.near_range_m if np.isfinite(area.near_range_m) else math.inf
 
         islands: list[Island] = []
         if not pc.below_plane(z_lidar) and len(idx):
             islands = islands_linkage(pts[idx], idx, float(cfg.island_threshold_m))
+            labels, extents = self._scan_clusters
+            if labels is not None:
+                for isl in islands:
+                    lab = np.unique(labels[isl.indices])
+                    isl.full_extent = float(extents[lab[lab >= 0]].max()) if np.any(lab >= 0) else isl.extent
         if pc.below_plane(z_lidar) and len(idx):
             rep.reject("below_lidar_plane_ignored", 1)
 
@@ -590,6 +624,9 @@ class Consciousness:
                 continue
             reason = None
             behind = False
+            if isl.physical_extent > pc.max_island:
+                rep.reject("too_big")  # a wall or furniture piece, never a leg of this class
+                continue
             if cfg.corner_check:
                 if area.bottom_reliable:
                     lo = area.near_range_lo * (1.0 - tol) - 0.05
@@ -598,6 +635,14 @@ class Consciousness:
                         reason = "corner_range"
                     elif r_front > hi:
                         behind = True
+                if reason is None and not area.truncated["bottom"]:
+                    # the camera sees the island at the LIDAR's height (nothing in front of it at that
+                    # height, or the LIDAR would not see it): the box must reach down to that row
+                    pts3 = np.hstack([cam.T_base_scan_2d.transform_points(isl.points), np.full((len(isl), 1), z_lidar)])
+                    uv, depth = cam.project(pts3)
+                    ok = depth > 0.05
+                    if np.any(ok) and y2 < float(np.min(uv[ok, 1])) - float(cfg.bottom_margin_px) - 2.0:
+                        reason = "corner_height"
                 if reason is None:
                     app_w = (x2 - x1) * r_front / fx
                     app_h = (y2 - y1) * r_front / fy
@@ -608,9 +653,11 @@ class Consciousness:
                         reason = "size_far"
                     elif not (area.truncated["top"] or area.truncated["bottom"]) and app_h > pc.height[2] * k_size + 0.1:
                         reason = "size_far"
-                leg_like = pc.legged and isl.extent <= pc.leg_size_max
+                leg_like = pc.legged and isl.physical_extent <= pc.leg_size_max
                 if reason is None and pc.solid_fraction > 0.0 and not leg_like:
-                    if self._see_through(area, pc, r_front, beam_b, beam_r) or self._grid_free(area, pc, r_front, T_map_scan, grid):
+                    if self._see_through(area, pc, r_front, beam_b, beam_r):
+                        reason = "corner_see_through"
+                    elif self._grid_free(area, pc, r_front, T_map_scan, grid):
                         reason = "corner_free_space"
             if reason is not None:
                 rep.reject(reason)
@@ -634,7 +681,7 @@ class Consciousness:
             costs = [c + w_range * (r - r_min) / max(r_min, 0.3) for (_, c, r) in passing]
             best = passing[int(np.argmin(costs))][0]
             group = [best]
-            if cfg.legs and pc.legged and islands[best].extent <= pc.leg_size_max:
+            if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max:
                 group = self._group_legs(best, islands, behind_ok, pc)
             pts_scan = np.vstack([islands[g].points for g in group])
             pts_map = T_map_scan.transform_points(pts_scan)
@@ -644,15 +691,15 @@ class Consciousness:
                 app = 2.0 * float(r_pts.min()) * math.tan(area.half_angle)
             ev = ObjectEvidence()
             ev.add_points(pts_map)
-            ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app)  # a box cut by the border: a viewpoint only
+            ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app, open_side=open_side)  # cut box: a viewpoint only
             support = None
-            legs = pc.legged and all(islands[g].extent <= pc.leg_size_max for g in group)
+            legs = pc.legged and all(islands[g].physical_extent <= pc.leg_size_max for g in group)
             ev.observations, ev.leg_obs = 1, int(legs)
             if pc.legged:
                 off = area.angular_offsets(islands[best].centroid[None, :])[0]
                 support = (
                     len(group) == 1
-                    and islands[best].extent <= pc.leg_size_max
+                    and islands[best].physical_extent <= pc.leg_size_max
                     and abs(off) < 0.25 * half
                     and np.isfinite(app)
                     and app > 3.0 * max(islands[best].extent, 0.05)
@@ -675,6 +722,7 @@ class Consciousness:
                     apparent_width=app,
                     support=support,
                     legs=legs,
+                    open_side=open_side,
                 ),
                 islands,
             )
@@ -747,7 +795,7 @@ class Consciousness:
         group = [best]
         pts = islands[best].points
         c0 = islands[best].centroid
-        others = [i for i in eligible if i != best and islands[i].extent <= pc.leg_size_max]
+        others = [i for i in eligible if i != best and islands[i].physical_extent <= pc.leg_size_max]
         others.sort(key=lambda i: float(np.linalg.norm(islands[i].centroid - c0)))
         for i in others:
             trial = np.vstack([pts, islands[i].points])
@@ -835,8 +883,15 @@ class Consciousness:
             if not match and cand.footprint is not None:
                 match = bool(cand.footprint.contains(t.footprint.center[None, :])[0])
             if not match and (partial or t.partial_only) and len(cand.points):
-                # a partial view of a large object: its points continue the object's
-                match = _contiguous(cand.points, t.evidence.points, t.prior, thr)
+                # a partial view of a large object: its points continue the object's (one of its
+                # typical shapes holds both)
+                match = _contiguous(cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True)
+                if match and partial:
+                    ev_c = ObjectEvidence()
+                    ev_c.add_ray(cand.ray_origin, cand.ray_dir, 0.0, open_side=cand.open_side)
+                    match = _toward_open_side(ev_c, cand.points, t.evidence.points)
+                if match and t.partial_only:
+                    match = _toward_open_side(t.evidence, t.evidence.points, cand.points)
                 if match:
                     d = thr + float(_min_distance(cand.points, t.evidence.points))
             if match and d < best_d:
@@ -880,7 +935,9 @@ class Consciousness:
         if cand.ground_center is not None:
             ev.add_ground_center(cand.ground_center, w, kf)
         if cand.ray_origin is not None and cand.ray_dir is not None:
-            ev.add_ray(cand.ray_origin, cand.ray_dir, cand.ray_weight, kf, decay=w, apparent_width=cand.apparent_width)
+            ev.add_ray(
+                cand.ray_origin, cand.ray_dir, cand.ray_weight, kf, decay=w, apparent_width=cand.apparent_width, open_side=cand.open_side
+            )
 
     def _update_track(self, t: _Track, cand: Candidate, stamp: float, kf: int, robot_moved: bool) -> bool:
         """Add a candidate's evidence to a track; False if its points were left out (shape inconsistent)."""
@@ -928,10 +985,12 @@ class Consciousness:
                     if not same and (a.partial_only or b.partial_only):
                         # fragments of one large object seen only in parts: they touch (or, if both are
                         # partial views, lie close) and together fit one object of the class
-                        if a.partial_only and b.partial_only:
-                            same = _contiguous(a.evidence.points, b.evidence.points, a.prior, a.prior.length[2], typical=True)
-                        else:
-                            same = _contiguous(a.evidence.points, b.evidence.points, a.prior, thr)
+                        same = _contiguous(a.evidence.points, b.evidence.points, a.prior, a.prior.length[2], typical=True)
+                        # ... and the other lies where the fragment continues beyond the image border
+                        if same and a.partial_only:
+                            same = _toward_open_side(a.evidence, a.evidence.points, b.evidence.points)
+                        if same and b.partial_only:
+                            same = _toward_open_side(b.evidence, b.evidence.points, a.evidence.points)
                     if same:
                         keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
                         self._merge_tracks(keep, drop)

@@ -173,6 +173,7 @@ class ObjectEvidence:
         self.ray_weight = np.zeros(0)
         self.ray_kf = np.zeros(0, dtype=np.int64)
         self.ray_app = np.zeros(0)  # apparent width seen along each ray (m), NaN if unknown
+        self.ray_open = np.zeros(0, dtype=np.int64)  # +1/-1: box cut by the image's left/right border
         self.gp_center: FloatArray | None = None
         self.gp_kf: int = NO_KEYFRAME
         #: legged classes: observations as one small island on the box's centre line vs. off it / several legs
@@ -223,10 +224,13 @@ class ObjectEvidence:
         kf: int = NO_KEYFRAME,
         decay: float = 1.0,
         apparent_width: float = float("nan"),
+        open_side: int = 0,
     ) -> None:
         """Add a bisector ray (object frame); older rays' weights are multiplied by ``decay`` first.
 
         ``apparent_width``: the object's width across the ray as the box shows it (m), NaN if unknown.
+        ``open_side``: +1 if the box was cut by the image's left border (the ray is then that border's
+        half-line and the object continues to its left), −1 for the right border, 0 otherwise.
         """
         d = np.asarray(direction, dtype=np.float64)
         n = float(np.linalg.norm(d))
@@ -240,6 +244,7 @@ class ObjectEvidence:
         self.ray_weight = np.append(self.ray_weight, float(weight))
         self.ray_kf = np.append(self.ray_kf, int(kf))
         self.ray_app = np.append(self.ray_app, float(apparent_width))
+        self.ray_open = np.append(self.ray_open, int(open_side))
         if len(self.ray_weight) > self.max_rays:
             # keep the viewpoints spread out: drop the older ray of the closest pair of origins
             o_all = self.ray_origin
@@ -250,6 +255,7 @@ class ObjectEvidence:
             keep[i] = False
             self.ray_origin, self.ray_dir = self.ray_origin[keep], self.ray_dir[keep]
             self.ray_weight, self.ray_kf, self.ray_app = self.ray_weight[keep], self.ray_kf[keep], self.ray_app[keep]
+            self.ray_open = self.ray_open[keep]
 
     def add_ground_center(self, center: FloatArray, weight_old: float, kf: int = NO_KEYFRAME) -> None:
         """Rolling average of ground-plane centres: ``c ← w·c + (1 − w)·new`` (paper's 90 %)."""
@@ -266,8 +272,8 @@ class ObjectEvidence:
                 m = other.point_kf == k
                 # repeat points by hits to keep their weight
                 self.add_points(np.repeat(other.points[m], other.hits[m], axis=0), int(k))
-        for o, d, w, k, a in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app):
-            self.add_ray(o, d, float(w), int(k), apparent_width=float(a))
+        for o, d, w, k, a, op in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app, other.ray_open):
+            self.add_ray(o, d, float(w), int(k), apparent_width=float(a), open_side=int(op))
         self.support_obs += other.support_obs
         self.corner_obs += other.corner_obs
         self.observations += other.observations
@@ -312,6 +318,7 @@ class ObjectEvidence:
             "ray_weight": self.ray_weight.tolist(),
             "ray_kf": self.ray_kf.tolist(),
             "ray_app": [None if not np.isfinite(a) else float(a) for a in self.ray_app],
+            "ray_open": self.ray_open.tolist(),
             "gp_center": None if self.gp_center is None else self.gp_center.tolist(),
             "gp_kf": self.gp_kf,
             "support_obs": self.support_obs,
@@ -330,6 +337,7 @@ class ObjectEvidence:
         e.ray_dir = np.asarray(d.get("ray_dir", []), dtype=np.float64).reshape(-1, 2)
         e.ray_weight = np.asarray(d.get("ray_weight", []), dtype=np.float64).reshape(-1)
         e.ray_kf = np.asarray(d.get("ray_kf", []), dtype=np.int64).reshape(-1)
+        e.ray_open = np.asarray(d.get("ray_open", [0] * len(e.ray_kf)), dtype=np.int64).reshape(-1)
         app = d.get("ray_app")
         e.ray_app = (
             np.full(len(e.ray_kf), np.nan)
@@ -344,7 +352,7 @@ class ObjectEvidence:
         e.observations = int(d.get("observations", 0))
         e.leg_obs = int(d.get("leg_obs", 0))
         if not (len(e.points) == len(e.hits) == len(e.point_kf)) or not (
-            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app)
+            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open)
         ):
             raise ValueError("object evidence: array lengths differ")
         return e
@@ -441,6 +449,11 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
             w_app = float(np.median(vals))
 
     support = pc.legged and ev.support_obs > ev.corner_obs and max(d_obs) <= pc.leg_size_max * 1.5
+    if not np.any(ev.ray_weight > 1e-6) and len(views):
+        # seen only through boxes cut by the image border: the rest is outside the image, anywhere
+        # from the border round to the robot's side, so nothing is extrapolated; fragments of one
+        # object join later when they meet (Consciousness)
+        return Footprint(center0, th, float(max(d_obs[0], 0.05)), float(max(d_obs[1], 0.05)))
     if depth_axis < 0 or support:
         # no viewpoint (or a central support): the points are the object's centre
         a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
@@ -476,13 +489,15 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
                 size[i] = d_obs[i]
                 slack = 0.05 * d_obs[i] + 0.01
                 s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
+                s_prior[i] = mid[i]
+                s_prior[i] = mid[i]
             else:
                 # incomplete (occluded, or legs): it spans the observed part and at most its size; the rays decide
                 t_max = max(d_obs[i], 1.25 * t_tan)
                 size[i] = max(d_obs[i], t_tan)
                 s_lo[i], s_hi[i] = hi[i] - t_max / 2, lo[i] + t_max / 2
                 lam[i] = 0.1
-            s_prior[i] = mid[i]
+                s_prior[i] = mid[i]
         elif side[i] == 0 or d_obs[i] >= dep_nom:
             size[i] = d_obs[i]
             slack = 0.05 * d_obs[i] + 0.01

@@ -34,6 +34,9 @@ class Island:
     indices: NDArray[np.int64]
     buffer_m: float = 0.05
     seed_polygon: Polygon | None = field(default=None, repr=False)
+    #: extent of the whole scan cluster this island belongs to (it may continue outside its area);
+    #: NaN when unknown
+    full_extent: float = float("nan")
 
     @cached_property
     def polygon(self) -> Polygon:
@@ -68,8 +71,25 @@ class Island:
         lo, hi = self.points.min(axis=0), self.points.max(axis=0)
         return float(np.hypot(*(hi - lo)))
 
+    @property
+    def physical_extent(self) -> float:
+        """Extent of the physical cluster: ``full_extent`` if known, else the island's own."""
+        return self.full_extent if np.isfinite(self.full_extent) else self.extent
+
     def __len__(self) -> int:
         return len(self.points)
+
+
+def cluster_extents(points: FloatArray, gap_m: float) -> tuple[NDArray[np.int64], FloatArray]:
+    """Single-linkage clusters of a whole scan: ``(N,)`` cluster label per point and ``(C,)`` extents."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    labels = np.full(len(pts), -1, dtype=np.int64)
+    isl = islands_linkage(pts, np.arange(len(pts)), gap_m)
+    ext = np.zeros(len(isl))
+    for k, i in enumerate(isl):
+        labels[i.indices] = k
+        ext[k] = i.extent
+    return labels, ext
 
 
 def islands_linkage(points: FloatArray, indices: NDArray[np.int64], gap_m: float) -> list[Island]:

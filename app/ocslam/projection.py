@@ -343,10 +343,12 @@ def area_from_box(
     max_range_m: float,
     bottom_margin_px: float = 6.0,
     edge_margin_px: float = 8.0,
+    near_tolerance: float = 0.25,
 ) -> BoundingArea | None:
     """The improved bounding area of one box in the camera's pixel grid (see module docstring).
 
-    Returns ``None`` for a degenerate box (non-finite, or empty after clipping to the image).
+    The polygon starts at ``near_range_lo·(1 − near_tolerance)``. Returns ``None`` for a degenerate
+    box (non-finite, or empty after clipping to the image).
     """
     W, H = camera.info.width, camera.info.height
     vals = np.array([det.x1, det.y1, det.x2, det.y2], dtype=np.float64)
@@ -371,7 +373,7 @@ def area_from_box(
         near_lo = 0.0  # the floor contact is not visible: no lower bound
     near_lo = min(near_lo, max_range_m)
     apex = camera.apex_scan
-    r_poly = near_lo if np.isfinite(near_lo) else 0.0
+    r_poly = max(near_lo * (1.0 - near_tolerance), 0.0) if np.isfinite(near_lo) else 0.0
     r_poly = min(r_poly, 0.95 * max_range_m)
     poly = _wedge_polygon(apex, b_left, b_right, r_poly, max_range_m)
     direction = np.array([np.cos(b_center), np.sin(b_center)])
@@ -399,6 +401,7 @@ def bounding_areas(
     max_range_m: float,
     bottom_margin_px: float = 6.0,
     edge_margin_px: float = 8.0,
+    near_tolerance: float = 0.25,
 ) -> list[BoundingArea]:
     """Improved bounding areas of all boxes (``base_scan``); degenerate boxes are skipped.
 
@@ -415,7 +418,7 @@ def bounding_areas(
         boxes = detections
     out = []
     for det in boxes:
-        a = area_from_box(_scale_box(det, sx, sy), camera, max_range_m, bottom_margin_px, edge_margin_px)
+        a = area_from_box(_scale_box(det, sx, sy), camera, max_range_m, bottom_margin_px, edge_margin_px, near_tolerance)
         if a is not None:
             a.detection = det
             out.append(a)

@@ -376,7 +376,7 @@ def test_duck_is_missed_in_seed_mode():
 # -- ghost decay --------------------------------------------------------------------------------------------
 
 
-def _seen_then_missed(occluder: bool):
+def _seen_then_missed(occluder: bool, missed: int = 14):
     ball = Cylinder(1.8, 0.0, 0.11, 0.0, 0.22)
     c = make(decay_rate_per_s=0.15)
     drive(c, [ball], [("ball", ball)], line(6))
@@ -384,14 +384,18 @@ def _seen_then_missed(occluder: bool):
     p0 = o.presence
     # the ball is gone (or hidden); no detection any more
     shapes = [Box(1.0, 0.0, 0.1, 0.6, 0.0, 0.0, 1.0), ball] if occluder else []
-    drive(c, shapes, [], [Pose2(0.2, 0.0, 0.0)] * 6, t0=1.2, dt=0.2)
+    drive(c, shapes, [], [Pose2(0.2, 0.0, 0.0)] * missed, t0=1.2, dt=0.2)
     return p0, c
 
 
 def test_ghost_decays_in_view():
-    p0, c = _seen_then_missed(occluder=False)
+    """Seen in 6 frames, then in clear view but never detected: once the misses outnumber the
+    detections (the 7th miss), presence falls at decay_rate_per_s."""
+    p0, c = _seen_then_missed(occluder=False, missed=6)
+    assert c.objects[0].presence == pytest.approx(p0)  # a few misses: detectors miss real objects too
+    p0, c = _seen_then_missed(occluder=False, missed=14)
     (o,) = c.objects
-    assert o.presence == pytest.approx(p0 - 0.15 * 1.2, abs=1e-6)
+    assert o.presence == pytest.approx(p0 - 0.15 * 0.2 * (14 - 6), abs=1e-6)
     assert c.visible_objects() == []
 
 

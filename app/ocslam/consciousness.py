@@ -156,6 +156,7 @@ class _Track:
     touched_stamp: float = -math.inf
     near_range: float = math.inf  # this frame's projection distance (collision rule)
     complete_views: int = 0  # observations through boxes not cut by the image border
+    misses: int = 0  # frames in clear view (in range, not occluded) without a box of its class
 
     @property
     def partial_only(self) -> bool:
@@ -350,6 +351,8 @@ class Consciousness:
                     "last_seen": t.last_seen,
                     "last_frame_stamp": t.last_frame_stamp,
                     "detections": t.detections,
+                    "misses": t.misses,
+                    "complete_views": t.complete_views,
                     "evidence": t.evidence.state_dict(),
                 }
                 for t in self._tracks
@@ -380,6 +383,8 @@ class Consciousness:
                     last_seen=float(td.get("last_seen", 0.0)),
                     last_frame_stamp=float(td.get("last_frame_stamp", 0.0)),
                     detections=int(td.get("detections", 1)),
+                    misses=int(td.get("misses", 0)),
+                    complete_views=int(td.get("complete_views", 0)),
                 )
                 t.refresh()
                 tracks.append(t)
@@ -534,7 +539,11 @@ class Consciousness:
         member = assign_points(pts_all, areas, exclusive=True, range_tolerance=float(cfg.range_tolerance))
 
         # the whole scan's clusters: an island clipped by its area may belong to a wall
-        labels, extents = cluster_extents(pts_all, float(cfg.island_threshold_m)) if areas else (None, None)
+        labels, extents = (
+            cluster_extents(pts_all, float(cfg.island_threshold_m), np.flatnonzero(valid), float(scan.angle_increment), len(ranges))
+            if areas
+            else (None, None)
+        )
         self._scan_clusters = (labels, extents)
         candidates: list[Candidate | None] = []
         for k, area in enumerate(areas):
@@ -1025,6 +1034,7 @@ class Consciousness:
         keep.frames = frames
         keep.detections += drop.detections
         keep.complete_views += drop.complete_views
+        keep.misses += drop.misses
         keep.last_seen = max(keep.last_seen, drop.last_seen)
         keep.last_frame_stamp = max(keep.last_frame_stamp, drop.last_frame_stamp)
         keep.created = min(keep.created, drop.created)
@@ -1060,6 +1070,12 @@ class Consciousness:
                 keep.append(t)
                 continue
             if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, float(cfg.occlusion_margin_m)):
+                keep.append(t)
+                continue
+            # a clear miss. Detectors miss real objects now and then (and the camera may be blocked above
+            # the LIDAR's plane), so only an object missed more often than it was detected decays.
+            t.misses += 1
+            if t.misses <= t.detections:
                 keep.append(t)
                 continue
             t.presence = decay_presence(t.presence, float(cfg.decay_rate_per_s), dt)

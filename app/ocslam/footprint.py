@@ -422,7 +422,11 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
         a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
         return Footprint(ev.gp_center.copy(), yaw, a, b)
 
-    th, lo, hi = min_area_rect(ev.points)
+    # points seen in a tenth of the object's best-seen voxel's observations or more (stray points that
+    # once joined the object — a background point between a pedestal table's legs — do not shape it)
+    keep = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
+    pts, hits = ev.points[keep], ev.hits[keep]
+    th, lo, hi = min_area_rect(pts)
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
     d_obs = hi - lo
     mid = 0.5 * (lo + hi)
@@ -481,8 +485,8 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
             # over-extended evidence (background points): the object is somewhere inside it
             size[i] = cap
             s_lo[i], s_hi[i] = lo[i] + cap / 2, hi[i] - cap / 2
-            w = ev.hits.astype(np.float64)
-            proj = ev.points @ axes[i]
+            w = hits.astype(np.float64)
+            proj = pts @ axes[i]
             s_prior[i] = float(np.clip(np.sum(proj * w) / max(np.sum(w), 1e-9), s_lo[i], s_hi[i]))
         elif i == tan_axis:
             if tan_complete:

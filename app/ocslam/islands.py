@@ -80,16 +80,49 @@ class Island:
         return len(self.points)
 
 
-def cluster_extents(points: FloatArray, gap_m: float) -> tuple[NDArray[np.int64], FloatArray]:
-    """Single-linkage clusters of a whole scan: ``(N,)`` cluster label per point and ``(C,)`` extents."""
+def cluster_extents(
+    points: FloatArray,
+    gap_m: float,
+    beam_index: NDArray[np.int64] | None = None,
+    angle_increment: float = 0.0,
+    n_beams: int = 0,
+    max_incidence_deg: float = 10.0,
+    sigma_m: float = 0.01,
+) -> tuple[NDArray[np.int64], FloatArray]:
+    """Clusters of a whole scan, for telling a small object from a piece of a larger surface.
+
+    Points join when they are within ``gap_m`` (single linkage), or when they come from adjacent beams
+    closer than the adaptive breakpoint distance ``r·sin(Δφ)/sin(λ − Δφ) + 3σ`` (Borges & Aldon), so a
+    wall seen at a grazing angle — a chain of sparse points — stays one surface instead of a row of
+    "legs". ``beam_index``: ``(N,)`` beam number of each point (scan order), ``n_beams`` the scan's
+    size. Returns ``(N,)`` cluster labels and ``(C,)`` cluster extents (bounding-box diagonals).
+    """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    labels = np.full(len(pts), -1, dtype=np.int64)
-    isl = islands_linkage(pts, np.arange(len(pts)), gap_m)
-    ext = np.zeros(len(isl))
-    for k, i in enumerate(isl):
-        labels[i.indices] = k
-        ext[k] = i.extent
-    return labels, ext
+    n = len(pts)
+    labels = np.full(n, -1, dtype=np.int64)
+    if n == 0:
+        return labels, np.zeros(0)
+    pairs = [cKDTree(pts).query_pairs(r=gap_m, output_type="ndarray")] if n > 1 else []
+    if beam_index is not None and n > 1 and angle_increment > 0.0:
+        bi = np.asarray(beam_index, dtype=np.int64)
+        nxt = np.roll(np.arange(n), -1)
+        step = (bi[nxt] - bi) % max(n_beams, 1) if n_beams else bi[nxt] - bi
+        adjacent = step == 1
+        r = np.hypot(pts[:, 0], pts[:, 1])
+        dphi = abs(angle_increment)
+        lam = np.deg2rad(max_incidence_deg)
+        dmax = r * np.sin(dphi) / np.sin(max(lam - dphi, 1e-3)) + 3.0 * sigma_m
+        dist = np.hypot(*(pts[nxt] - pts).T)
+        ok = adjacent & (dist <= np.maximum(dmax, gap_m))
+        pairs.append(np.stack([np.arange(n)[ok], nxt[ok]], axis=1))
+    edges = np.vstack([p for p in pairs if len(p)]) if any(len(p) for p in pairs) else np.zeros((0, 2), dtype=np.int64)
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    lo = np.full((labels.max() + 1, 2), np.inf)
+    hi = np.full((labels.max() + 1, 2), -np.inf)
+    np.minimum.at(lo, labels, pts)
+    np.maximum.at(hi, labels, pts)
+    return labels.astype(np.int64), np.hypot(*(hi - lo).T)
 
 
 def islands_linkage(points: FloatArray, indices: NDArray[np.int64], gap_m: float) -> list[Island]:

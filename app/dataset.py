@@ -377,6 +377,18 @@ def sensor_effects(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------
 
 
+def _edge_distance(o, angle: float) -> float:
+    """Distance from an object's centre to its footprint's edge in direction ``angle``."""
+    from shapely.geometry import LineString, Polygon
+
+    far = LineString([(o.x, o.y), (o.x + 20 * math.cos(angle), o.y + 20 * math.sin(angle))])
+    hit = Polygon(o.footprint()).exterior.intersection(far)
+    if hit.is_empty:
+        return 0.0
+    pts = np.asarray([g.coords[0] for g in getattr(hit, "geoms", [hit])])
+    return float(np.max(np.hypot(pts[:, 0] - o.x, pts[:, 1] - o.y)))
+
+
 def _line_of_sight(sim, xy: tuple[float, float], oid: int) -> bool:
     """True if a ray from camera height at ``xy`` to the object's mid-height centre first meets the object."""
     import pybullet as p
@@ -399,8 +411,9 @@ def sample_viewpoint(sim, rz: Randomizer, rng: np.random.Generator, tries: int =
         if mode < 0.7 and world.objects:
             oid = int(rng.integers(len(world.objects)))
             o = world.objects[oid]
-            d = float(rng.uniform(0.45, 4.0) if rng.random() < 0.8 else rng.uniform(0.3, 0.8))
             a = rng.uniform(-math.pi, math.pi)
+            # distance from the object's footprint edge (large objects are seen from further away)
+            d = _edge_distance(o, a) + float(rng.uniform(0.25, 3.5) if rng.random() < 0.85 else rng.uniform(0.1, 0.5))
             x, y = o.x + d * math.cos(a), o.y + d * math.sin(a)
             yaw = math.atan2(o.y - y, o.x - x) + rng.uniform(-0.5, 0.5)
             if not _line_of_sight(sim, (x, y), oid):
@@ -474,8 +487,10 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
                 vis = visible_boxes(frame.segmentation)
                 min_px = opts.label_filter.scaled(W)[0]
                 cands = [i for i, v in vis.items() if i in class_of and v[4] >= min_px]
-                full = silhouettes.counts(frame.T_world_camera, frame.info.K, W, H, cands)
-                labels = make_labels(frame.segmentation, class_of, full, opts.label_filter)
+                sil = silhouettes.silhouettes(frame.T_world_camera, frame.info.K, W, H, cands)
+                full = {k: v[0] for k, v in sil.items()}
+                inside = {k: v[1] for k, v in sil.items()}
+                labels = make_labels(frame.segmentation, class_of, full, opts.label_filter, inside)
                 if not any(lb.keep for lb in labels) and rng.random() > opts.empty_keep_prob:
                     continue
                 rgb = sensor_effects(frame.image.data, rng) if opts.randomize else frame.image.data
@@ -498,6 +513,7 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
                                 "keep": lb.keep,
                                 "visible_pixels": lb.visible_pixels,
                                 "visible_fraction": round(lb.visible_fraction, 4),
+                                "in_frame_fraction": round(lb.in_frame_fraction, 4),
                                 "object": world.object_name(lb.object_id),
                             }
                             for lb in labels
@@ -535,6 +551,7 @@ def _coco(records: list[dict]) -> dict[str, Any]:
                     "area": (x2 - x1) * (y2 - y1),
                     "iscrowd": 0 if lb["keep"] else 1,
                     "visible_fraction": lb["visible_fraction"],
+                    "in_frame_fraction": lb["in_frame_fraction"],
                     "visible_pixels": lb["visible_pixels"],
                     "object": lb["object"],
                 }

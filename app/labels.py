@@ -7,6 +7,9 @@ the box a detector must predict). It is kept when enough of the object is visibl
 - ``visible_fraction ≥ min_visible_fraction``, where ``visible_fraction = visible_pixels / full_pixels``
   and ``full_pixels`` is the object's *unoccluded, untruncated* silhouette area at the same pixel scale
   (rendered alone on an image plane that extends past the frame, see :func:`silhouette_window`), and
+- ``in_frame_fraction ≥ min_in_frame_fraction``: at least half of the silhouette is inside the frame
+  (an object cut by the sides or the bottom to less than half of itself, like one table leg or a sofa
+  filling the view from 20 cm, has lost what tells it apart), and
 - the box's shorter side ≥ ``min_box_px``.
 
 Objects that are visible but fail these tests are returned as *ignore* regions: they are not training
@@ -55,6 +58,7 @@ class LabelFilter:
     min_visible_fraction: float = 0.35
     min_box_px: float = 8.0
     reference_width: int = 224
+    min_in_frame_fraction: float = 0.5
 
     def scaled(self, image_width: int) -> tuple[float, float]:
         """``(min_pixels, min_box_px)`` in pixels of an image ``image_width`` wide."""
@@ -75,10 +79,18 @@ class ObjectLabel:
     visible_pixels: int
     full_pixels: int
     keep: bool
+    in_frame_pixels: int = -1  # unoccluded pixels inside the frame (-1: unknown, taken as full_pixels)
 
     @property
     def visible_fraction(self) -> float:
+        """Visible share of the whole silhouette (occlusion and truncation together)."""
         return self.visible_pixels / self.full_pixels if self.full_pixels > 0 else 1.0
+
+    @property
+    def in_frame_fraction(self) -> float:
+        """Share of the silhouette inside the frame (1 − truncation by the side and bottom edges)."""
+        inside = self.full_pixels if self.in_frame_pixels < 0 else self.in_frame_pixels
+        return min(1.0, inside / self.full_pixels) if self.full_pixels > 0 else 1.0
 
     @property
     def width(self) -> int:
@@ -118,20 +130,29 @@ def make_labels(
     class_of: Mapping[int, int],
     full_pixels: Mapping[int, int],
     filt: LabelFilter = LabelFilter(),
+    in_frame_pixels: Mapping[int, int] | None = None,
 ) -> list[ObjectLabel]:
     """Labels (kept or ignore) for every classified object visible in ``segmentation``.
 
     ``class_of`` maps object id → class index (ids not in it, e.g. walls or distractors, are skipped);
-    ``full_pixels`` maps object id → unoccluded silhouette area (missing: the visible area, i.e. fraction 1).
+    ``full_pixels`` maps object id → unoccluded silhouette area (missing: the visible area, i.e. fraction 1);
+    ``in_frame_pixels`` → the part of it inside the frame (missing: all of it, no truncation test).
     """
     out = []
     min_pixels, min_box = filt.scaled(np.shape(segmentation)[1])
+    in_frame_pixels = in_frame_pixels or {}
     for oid, (x1, y1, x2, y2, n) in sorted(visible_boxes(segmentation).items()):
         if oid not in class_of:
             continue
         full = max(int(full_pixels.get(oid, n)), n)
-        keep = n >= min_pixels and n / full >= filt.min_visible_fraction and min(x2 - x1, y2 - y1) >= min_box
-        out.append(ObjectLabel(oid, int(class_of[oid]), x1, y1, x2, y2, n, full, bool(keep)))
+        inside = min(max(int(in_frame_pixels.get(oid, full)), n), full)
+        keep = (
+            n >= min_pixels
+            and n / full >= filt.min_visible_fraction
+            and inside / full >= filt.min_in_frame_fraction
+            and min(x2 - x1, y2 - y1) >= min_box
+        )
+        out.append(ObjectLabel(oid, int(class_of[oid]), x1, y1, x2, y2, n, full, bool(keep), inside))
     return out
 
 
@@ -252,7 +273,24 @@ class SilhouetteRenderer:
         margin_top: float = 0.0,
         max_pixels: int | None = None,
     ) -> dict[int, int]:
-        """``{object id: pixel area}`` of each object alone in the camera ``K`` at ``T_world_camera``
+        """``{object id: pixel area}`` (see :meth:`silhouettes`)."""
+        return {k: v[0] for k, v in self.silhouettes(
+            T_world_camera, K, width, height, object_ids, margin=margin, margin_top=margin_top, max_pixels=max_pixels
+        ).items()}
+
+    def silhouettes(
+        self,
+        T_world_camera: NDArray[np.float64],
+        K: NDArray[np.float64],
+        width: int,
+        height: int,
+        object_ids,
+        *,
+        margin: float = 1.0,
+        margin_top: float = 0.0,
+        max_pixels: int | None = None,
+    ) -> dict[int, tuple[int, int]]:
+        """``{object id: (pixel area, pixel area inside the frame)}`` of each object alone in the camera ``K`` at ``T_world_camera``
         (optical frame, z forward), on the image plane extended ``margin`` frame sizes past the left,
         right and bottom edges and ``margin_top`` above the top edge.
 
@@ -268,7 +306,7 @@ class SilhouetteRenderer:
         T_cam_world = np.linalg.inv(T)
         eye = T[:3, 3]
         max_pixels = int(max_pixels or 16384)
-        out: dict[int, int] = {}
+        out: dict[int, tuple[int, int]] = {}
         for oid in object_ids:
             oid = int(oid)
             if not 0 <= oid < len(self.world.objects):
@@ -276,7 +314,7 @@ class SilhouetteRenderer:
             cid, bodies, corners = self._client(oid)
             win = silhouette_window((T_cam_world @ corners.T).T[:, :3], K, width, height, self.near, margin, margin_top)
             if win is None:
-                out[oid] = 0
+                out[oid] = (0, 0)
                 continue
             u0, v0, u1, v1 = win
             w, h = u1 - u0, v1 - v0
@@ -286,8 +324,13 @@ class SilhouetteRenderer:
             seg = p.getCameraImage(
                 rw, rh, view, frustum_matrix(K, win, self.near, self.far), renderer=p.ER_TINY_RENDERER, physicsClientId=cid
             )[4]
-            n = int(np.count_nonzero(np.asarray(seg) >= 0))
-            out[oid] = int(round(n * (w * h) / (rw * rh)))
+            mask = np.asarray(seg).reshape(rh, rw) >= 0
+            # render pixel centres on the image plane: which of them fall inside the frame
+            uc = u0 + (np.arange(rw) + 0.5) * (w / rw)
+            vc = v0 + (np.arange(rh) + 0.5) * (h / rh)
+            inside = mask[np.ix_((vc >= 0) & (vc < height), (uc >= 0) & (uc < width))]
+            k = (w * h) / (rw * rh)
+            out[oid] = (int(round(np.count_nonzero(mask) * k)), int(round(np.count_nonzero(inside) * k)))
         return out
 
     def close(self) -> None:

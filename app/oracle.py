@@ -79,6 +79,7 @@ class OracleDetector:
             min_visible_fraction=float(cfg.oracle_min_visible_fraction) if full else 0.0,
             min_box_px=1.0,
             reference_width=w,
+            min_in_frame_fraction=0.0,
         )
         ignore = {CLASS_INDEX[n] for n in cfg.ignore_classes if n in CLASS_INDEX}
         boxes = []

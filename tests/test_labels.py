@@ -53,6 +53,11 @@ def test_make_labels_filters_by_pixels_fraction_and_size() -> None:
     # A looser fraction threshold keeps the occluded object, with its visible box.
     loose = make_labels(seg, {2: 3}, {2: 2000}, LabelFilter(min_pixels=40, min_visible_fraction=0.1, min_box_px=4, reference_width=100))
     assert loose[0].keep and (loose[0].x1, loose[0].y1, loose[0].x2, loose[0].y2) == (50, 50, 90, 60)
+    # Cut by the frame to 40 % of itself: not kept, though 40 % visible passes the visibility test.
+    cut = make_labels(seg, {1: 0}, {1: 1000}, LabelFilter(40, 0.35, 4, 100), in_frame_pixels={1: 400})
+    assert cut[0].in_frame_fraction == pytest.approx(0.4) and not cut[0].keep
+    half = make_labels(seg, {1: 0}, {1: 1000}, LabelFilter(40, 0.35, 4, 100), in_frame_pixels={1: 600})
+    assert half[0].keep
     # Thresholds are in pixels of the reference width: the same mask at twice the resolution keeps
     # the same objects.
     big = np.kron(seg, np.ones((2, 2), np.int32))
@@ -142,8 +147,13 @@ def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
         frame = sim.render_view(Pose2(0.0, 0.0, 0.0), width=W, height=H, camera_z=0.11, segmentation=True)
         class_of = {i: CLASS_INDEX[o.label] for i, o in enumerate(world.objects)}
         vis = visible_boxes(frame.segmentation)
-        full = sil.counts(frame.T_world_camera, frame.info.K, W, H, list(vis))
-        labels = {lb.object_id: lb for lb in make_labels(frame.segmentation, class_of, full, LabelFilter(40, 0.35, 4, reference_width=W))}
+        sils = sil.silhouettes(frame.T_world_camera, frame.info.K, W, H, list(vis))
+        full = {k: v[0] for k, v in sils.items()}
+        inside = {k: v[1] for k, v in sils.items()}
+        labels = {
+            lb.object_id: lb
+            for lb in make_labels(frame.segmentation, class_of, full, LabelFilter(40, 0.35, 4, reference_width=W), inside)
+        }
     assert set(labels) == {0, 1, 2}  # the gnome behind the camera is not seen
     # The fully visible ball: its exact projected sphere box, visible fraction 1.
     c_world = np.array([2.0, 0.25, 0.11, 1.0])
@@ -157,6 +167,9 @@ def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
     assert 0.0 < labels[1].visible_fraction < 0.9
     right = labels[2]
     assert right.x2 == W and 0.2 < right.visible_fraction < 0.8
+    # Nothing hides it: its in-frame silhouette is what is visible, and less than half is in the frame.
+    assert right.in_frame_pixels == pytest.approx(right.visible_pixels, rel=0.03)
+    assert not right.keep and labels[0].in_frame_fraction == 1.0
 
 
 def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:

@@ -29,6 +29,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--min-visible", type=float, default=0.35, help="label only objects at least this fraction visible")
     p.add_argument(
+        "--min-in-frame", type=float, default=0.5, help="label only objects with at least this fraction inside the frame"
+    )
+    p.add_argument(
         "--min-box", type=float, default=8.0, help="label only boxes whose shorter side is this long (px, image scaled to 224 px wide)"
     )
     p.add_argument("--no-randomize", action="store_true", help="no domain randomisation (plain renders)")
@@ -60,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         val_fraction=args.val_fraction,
         apartment=not args.no_apartment,
         apartment_images=args.apartment_images,
-        label_filter=LabelFilter(args.min_pixels, args.min_visible, args.min_box),
+        label_filter=LabelFilter(args.min_pixels, args.min_visible, args.min_box, min_in_frame_fraction=args.min_in_frame),
         randomize=not args.no_randomize,
         command=command_line(),
     )

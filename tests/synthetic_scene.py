@@ -107,27 +107,44 @@ def raycast(
 
 
 def outline3d(shape, n: int = 24) -> np.ndarray:
-    """(M, 3) points on the shape's surface outline (map frame)."""
+    """(M, 3) points on the shape's surface outline (map frame): its footprint ring at the bottom and top."""
     if isinstance(shape, Cylinder):
         t = np.linspace(0, 2 * np.pi, n, endpoint=False)
         ring = np.stack([shape.x + shape.r * np.cos(t), shape.y + shape.r * np.sin(t)], axis=1)
     else:
-        ring = shape.corners2d()
+        c = shape.corners2d()
+        k = max(n // 4, 1)
+        f = np.linspace(0.0, 1.0, k, endpoint=False)[:, None]
+        ring = np.vstack([c[i] + f * (c[(i + 1) % 4] - c[i]) for i in range(4)])
     lo = np.hstack([ring, np.full((len(ring), 1), shape.z0)])
     hi = np.hstack([ring, np.full((len(ring), 1), shape.z1)])
     return np.vstack([lo, hi])
 
 
 def project_shapes(parts, T_map_base: Pose2, camera: CameraModel) -> tuple[float, float, float, float] | None:
-    """Pixel box ``(x1, y1, x2, y2)`` around the projection of one or several shapes, clipped to the image."""
-    pts = np.vstack([outline3d(p) for p in parts])
+    """Pixel box ``(x1, y1, x2, y2)`` around the projection of one or several shapes, clipped to the image.
+
+    Parts of the outline behind the camera push the box to the image border on their side (a partial
+    view); ``None`` if nothing is in front of the camera or the box is empty.
+    """
+    pts = np.vstack([outline3d(p, n=96) for p in parts])
+    # densify the vertical edges so that clipping at the image border is faithful
     xy_base = T_map_base.inverse().transform_points(pts[:, :2])
-    uv, depth = camera.project(np.hstack([xy_base, pts[:, 2:3]]))
-    if np.any(depth <= 0.05):
+    p3 = np.hstack([xy_base, pts[:, 2:3]])
+    uv, depth = camera.project(p3)
+    front = depth > 0.05
+    if not np.any(front):
         return None
     W, H = camera.info.width, camera.info.height
-    x1, y1 = uv.min(axis=0)
-    x2, y2 = uv.max(axis=0)
+    x1, y1 = uv[front].min(axis=0)
+    x2, y2 = uv[front].max(axis=0)
+    behind = ~front
+    if np.any(behind):
+        lateral = p3[behind] - camera.center_base[None, :]
+        if np.any(lateral[:, 1] > 0):  # behind and to the left: the object continues past the left border
+            x1 = 0.0
+        if np.any(lateral[:, 1] < 0):
+            x2 = float(W)
     x1, x2 = np.clip([x1, x2], 0, W)
     y1, y2 = np.clip([y1, y2], 0, H)
     if x2 - x1 < 2 or y2 - y1 < 2:

@@ -236,6 +236,46 @@ def test_dog_leg_pairs_become_one_object():
     assert math.hypot(d.pose.x - 2.2, d.pose.y) < 0.1
 
 
+# -- partial views ---------------------------------------------------------------------------------------
+
+
+def test_sofa_seen_only_at_the_image_border_makes_one_object():
+    """Driving past a 2.2 m sofa standing beside the path: it is only ever seen cut by the image's
+    left border, in pieces. The pieces join (close, one sofa's size, never two boxes at once) into one."""
+    sofa = Box(1.9, 1.25, 2.2, 1.0, 0.0, 0.0, 0.8)  # x 0.8..3.0, y 0.75..1.75
+    c = make()
+    reps = drive(c, [sofa], [("chair", sofa)], line(30, x0=-0.8, step=0.12))
+    assert all(r.areas[0].truncated["left"] for r in reps if r.areas)
+    chairs = by_label(c.visible_objects(), "chair")
+    assert len(chairs) == 1
+    (o,) = chairs
+    assert 0.8 <= o.pose.x <= 3.0 and 0.75 <= o.pose.y <= 1.75  # inside the true footprint
+
+
+def test_a_wall_seen_at_a_grazing_angle_is_not_a_leg():
+    """A table near a wall that runs almost along the line of sight: the wall's sparse points fall in
+    the table's box between the legs; they belong to a long scan cluster, so they never join the legs."""
+    legs, top = table(2.2, 0.0, 1.2, 0.7, yaw=0.0)
+    wall = Box(3.5, 1.2, 4.0, 0.1, 0.1, 0.0, 2.4)  # a long wall to the left, nearly along the view
+    c = make()
+    drive(c, legs + [wall], [("table", legs + [top])], line(8, y0=-0.3, step=0.03))
+    (t,) = by_label(c.visible_objects(), "table")
+    assert math.hypot(t.pose.x - 2.2, t.pose.y) < 0.15
+    assert max(t.size_x, t.size_y) < 1.6
+
+
+def test_two_sofas_side_by_side_seen_through_two_boxes_stay_two():
+    sofa_a = Box(2.4, -0.7, 1.0, 1.8, 0.0, 0.0, 0.8)
+    sofa_b = Box(2.4, 1.35, 1.0, 1.8, 0.0, 0.0, 0.8)  # 0.25 m apart: together they would fit a long sofa
+    for x0 in (0.0, -1.0):  # both are cut by the image border, one on each side
+        c = make()
+        drive(c, [sofa_a, sofa_b], [("chair", sofa_a), ("chair", sofa_b)], line(8, x0=x0, step=0.03))
+        chairs = sorted(by_label(c.visible_objects(), "chair"), key=lambda o: o.pose.y)
+        assert len(chairs) == 2
+        for o, s in zip(chairs, (sofa_a, sofa_b)):
+            assert abs(o.pose.x - s.x) <= 0.55 and abs(o.pose.y - s.y) <= 0.95  # on its own sofa
+
+
 # -- corner problem ------------------------------------------------------------------------------------
 
 

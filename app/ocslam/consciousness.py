@@ -157,6 +157,13 @@ class _Track:
     near_range: float = math.inf  # this frame's projection distance (collision rule)
     complete_views: int = 0  # observations through boxes not cut by the image border
     misses: int = 0  # frames in clear view (in range, not occluded) without a box of its class
+    boxes: dict[float, int] = field(default_factory=dict)  # recent frames (stamp → box index) it was seen in
+
+    def saw(self, stamp: float, box: int, keep: int = 256) -> None:
+        self.boxes[stamp] = box
+        if len(self.boxes) > keep:
+            for k in sorted(self.boxes)[: len(self.boxes) - keep]:
+                del self.boxes[k]
 
     @property
     def partial_only(self) -> bool:
@@ -204,24 +211,10 @@ def _contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typi
     return pc.fits(float(d[0]), float(d[1]), tolerance=0.1)
 
 
-def _open_direction(ev: ObjectEvidence) -> FloatArray | None:
-    """Unit direction (object frame) in which an object seen through boxes cut by the image border
-    continues beyond that border; ``None`` without such views or when they disagree."""
-    m = ev.ray_open != 0
-    if not np.any(m):
-        return None
-    left = np.stack([-ev.ray_dir[m, 1], ev.ray_dir[m, 0]], axis=1) * ev.ray_open[m][:, None]
-    v = left.sum(axis=0)
-    n = float(np.linalg.norm(v))
-    return v / n if n > 0.5 * m.sum() else None
-
-
-def _toward_open_side(frag: ObjectEvidence, frag_pts: FloatArray, other_pts: FloatArray) -> bool:
-    """True if ``other_pts`` lie on the side where the fragment continues beyond the image border."""
-    d = _open_direction(frag)
-    if d is None or len(frag_pts) == 0 or len(other_pts) == 0:
-        return True
-    return float((other_pts.mean(axis=0) - frag_pts.mean(axis=0)) @ d) > 0.0
+def _co_observed(a: "_Track", b: "_Track") -> bool:
+    """True if two objects were seen in the same frame through different boxes: two instances."""
+    common = a.boxes.keys() & b.boxes.keys()
+    return any(a.boxes[k] != b.boxes[k] for k in common)
 
 
 class Consciousness:
@@ -239,6 +232,7 @@ class Consciousness:
         self._last_stamp: float | None = None
         self.last_report: FrameReport | None = None
         self._scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None] = (None, None)
+        self._stamp = -math.inf
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -500,6 +494,7 @@ class Consciousness:
             lp = self._last_pose
             robot_moved = lp is None or lp.distance(T_map_base) > 1e-4 or abs(float(_angle_wrap(lp.yaw - T_map_base.yaw))) > 1e-4
         self._last_pose = T_map_base
+        self._stamp = stamp
         dt = 0.0 if self._last_stamp is None else float(np.clip(stamp - self._last_stamp, 0.0, 1.0))
         self._last_stamp = stamp
 
@@ -885,6 +880,8 @@ class Consciousness:
         for t in self._tracks:
             if t.label != cand.label or t.footprint is None:
                 continue
+            if t.boxes.get(self._stamp, cand.area_index) != cand.area_index:
+                continue  # already seen in this frame through another box: another instance
             d = float(np.linalg.norm(t.footprint.center - c))
             match = d < thr or bool(t.footprint.contains(c[None, :], margin=0.5 * thr)[0])
             if not match and len(cand.points):
@@ -895,12 +892,6 @@ class Consciousness:
                 # a partial view of a large object: its points continue the object's (one of its
                 # typical shapes holds both)
                 match = _contiguous(cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True)
-                if match and partial:
-                    ev_c = ObjectEvidence()
-                    ev_c.add_ray(cand.ray_origin, cand.ray_dir, 0.0, open_side=cand.open_side)
-                    match = _toward_open_side(ev_c, cand.points, t.evidence.points)
-                if match and t.partial_only:
-                    match = _toward_open_side(t.evidence, t.evidence.points, cand.points)
                 if match:
                     d = thr + float(_min_distance(cand.points, t.evidence.points))
             if match and d < best_d:
@@ -924,6 +915,7 @@ class Consciousness:
             touched_stamp=stamp,
         )
         self._next_id += 1
+        t.saw(stamp, cand.area_index)
         t.complete_views = int(cand.ray_weight > 0.0)
         t.refresh()
         if t.footprint is None:
@@ -967,6 +959,7 @@ class Consciousness:
             t.presence, t.frames = update_presence(t.presence, t.frames, cand.confidence, self.cfg.frames_for_presence)
             t.last_frame_stamp = stamp
         t.touched_stamp = stamp
+        t.saw(stamp, cand.area_index)
         t.confidence = cand.confidence
         t.detections += 1
         t.complete_views += int(cand.ray_weight > 0.0)
@@ -995,11 +988,8 @@ class Consciousness:
                         # fragments of one large object seen only in parts: they touch (or, if both are
                         # partial views, lie close) and together fit one object of the class
                         same = _contiguous(a.evidence.points, b.evidence.points, a.prior, a.prior.length[2], typical=True)
-                        # ... and the other lies where the fragment continues beyond the image border
-                        if same and a.partial_only:
-                            same = _toward_open_side(a.evidence, a.evidence.points, b.evidence.points)
-                        if same and b.partial_only:
-                            same = _toward_open_side(b.evidence, b.evidence.points, a.evidence.points)
+                    if same and _co_observed(a, b):
+                        same = False  # seen side by side through two boxes in one frame: two objects
                     if same:
                         keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
                         self._merge_tracks(keep, drop)
@@ -1035,6 +1025,8 @@ class Consciousness:
         keep.detections += drop.detections
         keep.complete_views += drop.complete_views
         keep.misses += drop.misses
+        for k, v in drop.boxes.items():
+            keep.boxes.setdefault(k, v)
         keep.last_seen = max(keep.last_seen, drop.last_seen)
         keep.last_frame_stamp = max(keep.last_frame_stamp, drop.last_frame_stamp)
         keep.created = min(keep.created, drop.created)

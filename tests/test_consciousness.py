@@ -276,6 +276,26 @@ def test_two_sofas_side_by_side_seen_through_two_boxes_stay_two():
             assert abs(o.pose.x - s.x) <= 0.55 and abs(o.pose.y - s.y) <= 0.95  # on its own sofa
 
 
+def test_footprint_not_extended_into_known_free_space():
+    """Seen from one side, a shelf is completed to its depth behind the visible face; but not into
+    space the occupancy grid has seen empty (the face was its far side: an open shelf seen from inside)."""
+    from app.ocslam.messages import OccupancyGrid
+
+    panel = Box(2.5, 0.0, 0.02, 1.0, 0.0, 0.0, 1.1)
+    grid = OccupancyGrid(0.05, Pose2(-1.0, -3.0, 0.0), np.full((120, 120), -1, dtype=np.int8))
+    centers = grid.cell_centers().reshape(-1, 2)
+    behind = (centers[:, 0] > 2.55) & (centers[:, 0] < 3.5) & (np.abs(centers[:, 1]) < 0.6)
+    grid.data = np.where(behind, 0, -1).astype(np.int8).reshape(120, 120)
+    xs = {}
+    for g in (None, grid):
+        c = make()
+        drive(c, [panel], [("shelf", panel)], line(6), grid=g)
+        (o,) = by_label(c.visible_objects(), "shelf")
+        xs[g is None] = o.pose.x
+    assert xs[True] == pytest.approx(2.49 + 0.2, abs=0.05)  # extended by half the 0.4 m depth
+    assert xs[False] == pytest.approx(2.5, abs=0.03)  # kept on the face
+
+
 # -- corner problem ------------------------------------------------------------------------------------
 
 

@@ -174,8 +174,8 @@ class _Track:
     def prior(self) -> ClassPrior:
         return prior(self.label)
 
-    def refresh(self, ray_prior_weight: float = 1.0) -> None:
-        fp = estimate_footprint(self.evidence, self.prior, ray_prior_weight)
+    def refresh(self, known_free: Callable[[FloatArray], NDArray[np.bool_]] | None = None) -> None:
+        fp = estimate_footprint(self.evidence, self.prior, known_free=known_free)
         if fp is not None:
             self.footprint = fp
 
@@ -211,6 +211,22 @@ def _contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typi
     return pc.fits(float(d[0]), float(d[1]), tolerance=0.1)
 
 
+def _grid_free_fn(grid: OccupancyGrid | None) -> Callable[[FloatArray], NDArray[np.bool_]] | None:
+    """``(N, 2)`` points (grid frame) → True where the occupancy grid knows free space."""
+    if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
+        return None
+
+    def free(points: FloatArray) -> NDArray[np.bool_]:
+        cells = grid.world_to_cell(points)
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < grid.height) & (cells[:, 1] >= 0) & (cells[:, 1] < grid.width)
+        out = np.zeros(len(points), dtype=bool)
+        v = grid.data[cells[inside, 0], cells[inside, 1]].astype(np.int64)
+        out[inside] = (v >= 0) & (v < 20)
+        return out
+
+    return free
+
+
 def _co_observed(a: "_Track", b: "_Track") -> bool:
     """True if two objects were seen in the same frame through different boxes: two instances."""
     common = a.boxes.keys() & b.boxes.keys()
@@ -233,6 +249,7 @@ class Consciousness:
         self.last_report: FrameReport | None = None
         self._scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None] = (None, None)
         self._stamp = -math.inf
+        self._known_free: Callable[[FloatArray], NDArray[np.bool_]] | None = None
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -495,6 +512,7 @@ class Consciousness:
             robot_moved = lp is None or lp.distance(T_map_base) > 1e-4 or abs(float(_angle_wrap(lp.yaw - T_map_base.yaw))) > 1e-4
         self._last_pose = T_map_base
         self._stamp = stamp
+        self._known_free = _grid_free_fn(grid) if cfg.corner_check else None
         dt = 0.0 if self._last_stamp is None else float(np.clip(stamp - self._last_stamp, 0.0, 1.0))
         self._last_stamp = stamp
 
@@ -738,7 +756,7 @@ class Consciousness:
             if islands:
                 rep.reject("no_consistent_island")
             return None, islands
-        gp = self._ground_plane_center(area, pc, beam_b, beam_r, rep)
+        gp = self._ground_plane_center(area, pc, beam_b, beam_r, rep, max_range=float(cfg.ground_plane_max_range_m))
         if gp is None:
             return None, islands
         c_map = T_map_scan.transform_points(gp[None, :])[0]
@@ -811,7 +829,7 @@ class Consciousness:
         return group
 
     def _ground_plane_center(
-        self, area: BoundingArea, pc: ClassPrior, beam_b: FloatArray, beam_r: FloatArray, rep: FrameReport
+        self, area: BoundingArea, pc: ClassPrior, beam_b: FloatArray, beam_r: FloatArray, rep: FrameReport, max_range: float
     ) -> FloatArray | None:
         """The object's centre (LIDAR frame) from its bottom edge, or ``None`` (reason counted)."""
         cfg, cam = self.cfg, self.camera
@@ -819,7 +837,7 @@ class Consciousness:
             rep.reject("ground_plane_unreliable")
             return None
         near = float(area.near_range_m)
-        if near > cfg.ground_plane_max_range_m:
+        if near > max_range:
             rep.reject("ground_plane_far")
             return None
         x1, _y1, x2, _y2 = area.box_px
@@ -917,7 +935,7 @@ class Consciousness:
         self._next_id += 1
         t.saw(stamp, cand.area_index)
         t.complete_views = int(cand.ray_weight > 0.0)
-        t.refresh()
+        t.refresh(self._known_free)
         if t.footprint is None:
             t.footprint = cand.footprint
         self._tracks.append(t)
@@ -964,7 +982,7 @@ class Consciousness:
         t.detections += 1
         t.complete_views += int(cand.ray_weight > 0.0)
         t.last_seen = stamp
-        t.refresh()
+        t.refresh(self._known_free)
         return consistent
 
     def _resolve_track_collisions(self, touched: list[_Track], stamp: float, rep: FrameReport) -> None:
@@ -984,10 +1002,12 @@ class Consciousness:
                 frac = _overlap_fraction(a.footprint, b.footprint)
                 if a.label == b.label:
                     same = d < thr or frac >= ov
-                    if not same and (a.partial_only or b.partial_only):
-                        # fragments of one large object seen only in parts: they touch (or, if both are
-                        # partial views, lie close) and together fit one object of the class
-                        same = _contiguous(a.evidence.points, b.evidence.points, a.prior, a.prior.length[2], typical=True)
+                    if not same:
+                        # pieces of one object seen from different sides or only in parts (cut by the
+                        # image border): close (touching; within the class's length for partial views)
+                        # and together one object of the class
+                        gap = a.prior.length[2] if (a.partial_only or b.partial_only) else thr
+                        same = _contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=True)
                     if same and _co_observed(a, b):
                         same = False  # seen side by side through two boxes in one frame: two objects
                     if same:
@@ -1030,7 +1050,7 @@ class Consciousness:
         keep.last_seen = max(keep.last_seen, drop.last_seen)
         keep.last_frame_stamp = max(keep.last_frame_stamp, drop.last_frame_stamp)
         keep.created = min(keep.created, drop.created)
-        keep.refresh()
+        keep.refresh(self._known_free)
 
     def _decay(
         self,

@@ -18,6 +18,7 @@ positioned where the bisector rays cross (least squares) inside the range the po
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import math
 
@@ -396,7 +397,32 @@ def depth_for_width(width: float, pc: ClassPrior, legs: bool = False) -> tuple[f
     return pc.width[1], pc.width[0], pc.length[2]
 
 
-def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: float = 1.0) -> Footprint | None:
+FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
+
+
+def _extension_free(
+    known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
+) -> bool:
+    """True if most of the band the rectangle would grow into along axis ``i`` (by ``length``, towards
+    ``direction``) is known free."""
+    if length <= 0.05 or direction == 0:
+        return False
+    j = 1 - i
+    edge = hi[i] if direction > 0 else lo[i]
+    a = edge + direction * np.linspace(0.1, max(length - 0.05, 0.1), 6)
+    b = np.linspace(lo[j], hi[j], 5) if hi[j] - lo[j] > 0.05 else np.array([0.5 * (lo[j] + hi[j])])
+    A, B = np.meshgrid(a, b)
+    loc = np.stack([A.ravel(), B.ravel()], axis=1)
+    rect = np.zeros_like(loc)
+    rect[:, i], rect[:, j] = loc[:, 0], loc[:, 1]
+    pts = rect @ axes  # rectangle coordinates → object frame
+    free = known_free(pts)
+    return bool(np.mean(free) > 0.6)
+
+
+def estimate_footprint(
+    ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: float = 1.0, known_free: FreeFn | None = None
+) -> Footprint | None:
     """The object's footprint from its evidence and class prior (object frame). ``None`` if no evidence.
 
     1. The minimum-area rectangle of the points gives the orientation and the observed extents.
@@ -409,7 +435,9 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
        points and sizes allow on each axis.
 
     A legged object seen as one small support on the box's centre line (a pedestal table) keeps its
-    centre on that support.
+    centre on that support. ``known_free`` (``(N, 2)`` points → ``(N,)`` True where the occupancy grid
+    knows free space) vetoes an extension into space the LIDAR has seen empty: the points were then the
+    object's far side (an open shelf seen from inside).
     """
     L, W = pc.length, pc.width
     if not ev.has_points:
@@ -420,7 +448,16 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
             d = ev.ray_dir[-1]
             yaw = float(np.arctan2(d[1], d[0]) + np.pi / 2)
         a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
-        return Footprint(ev.gp_center.copy(), yaw, a, b)
+        # the ground-plane placements (rolling average) fix the range, the bisector rays the bearing
+        H = ray_prior_weight * np.eye(2)
+        g = ray_prior_weight * ev.gp_center
+        use = ev.ray_weight > 1e-6
+        if np.any(use):
+            n = np.stack([-ev.ray_dir[use, 1], ev.ray_dir[use, 0]], axis=1)
+            w = ev.ray_weight[use]
+            H = H + (n * w[:, None]).T @ n
+            g = g + (n * (w * np.sum(n * ev.ray_origin[use], axis=1))[:, None]).sum(axis=0)
+        return Footprint(np.linalg.solve(H, g), yaw, a, b)
 
     # points seen in a tenth of the object's best-seen voxel's observations or more (stray points that
     # once joined the object — a background point between a pedestal table's legs — do not shape it)
@@ -504,6 +541,12 @@ def estimate_footprint(ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: flo
                 s_prior[i] = mid[i]
         elif side[i] == 0 or d_obs[i] >= dep_nom:
             size[i] = d_obs[i]
+            slack = 0.05 * d_obs[i] + 0.01
+            s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
+            s_prior[i] = mid[i]
+        elif known_free is not None and _extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i]):
+            # the space it would extend into is known free: keep what was seen
+            size[i] = max(d_obs[i], 0.05)
             slack = 0.05 * d_obs[i] + 0.01
             s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
             s_prior[i] = mid[i]

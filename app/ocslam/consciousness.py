@@ -129,6 +129,7 @@ class FrameReport:
     merged: int = 0
     removed: int = 0
     decayed: int = 0
+    bearing_only: int = 0  # boxes that gave no object but saw a tracked one (presence frames)
     new_frame: bool = True
 
     def reject(self, reason: str, n: int = 1) -> None:
@@ -180,6 +181,31 @@ class _Track:
             self.footprint = fp
 
 
+@dataclass(eq=False)
+class _Sighting:
+    """A box that gave no object in its frame (beyond the LIDAR's range, or no consistent island):
+    its class, its wedge in the object frame and the range its bottom edge allows. A tracked object
+    of its class that it holds was seen again (bearing-only association)."""
+
+    label: str
+    confidence: float
+    stamp: float
+    kf: int
+    apex: FloatArray
+    direction: FloatArray  # the bisector
+    half_angle: float
+    r_lo: float
+    r_hi: float
+    weight: float  # bisector ray weight (0: box cut by the image border)
+    apparent_width: float = float("nan")
+
+    def holds(self, center: FloatArray, margin: float = 0.02) -> bool:
+        v = np.asarray(center, dtype=np.float64) - self.apex
+        r = float(np.hypot(v[0], v[1]))
+        ang = abs(float(_angle_wrap(np.arctan2(v[1], v[0]) - np.arctan2(self.direction[1], self.direction[0]))))
+        return ang <= self.half_angle + margin and self.r_lo <= r <= self.r_hi
+
+
 def _angle_wrap(a):
     return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
 
@@ -225,6 +251,20 @@ def _grid_free_fn(grid: OccupancyGrid | None) -> Callable[[FloatArray], NDArray[
         return out
 
     return free
+
+
+def _along_ray_close(origin: FloatArray, a: FloatArray, b: FloatArray, thr: float, rel: float = 0.25) -> bool:
+    """True if ``b`` is within ``thr`` of ``a`` across the line of sight from ``origin``, and within
+    ``max(thr, rel·range)`` along it (the uncertainty of ground-plane ranging)."""
+    v = a - origin
+    r = float(np.hypot(v[0], v[1]))
+    if r < 1e-6:
+        return float(np.hypot(*(b - a))) < thr
+    u = v / r
+    d = b - a
+    along = abs(float(d @ u))
+    across = abs(float(d[0] * u[1] - d[1] * u[0]))
+    return across < thr and along < max(thr, rel * r)
 
 
 def _co_observed(a: "_Track", b: "_Track") -> bool:
@@ -586,6 +626,19 @@ class Consciousness:
             t.near_range = cand.near_range
             if t not in touched:
                 touched.append(t)
+        # boxes that gave no object still see objects: a tracked object of the class in their wedge, at a
+        # range their bottom edge allows, is seen again (beyond the LIDAR's range, points rejected...)
+        for k, area in enumerate(areas):
+            cand = candidates[k]
+            if cand is not None and cand.status != "collision":
+                continue
+            sight = self._sighting(area, T_map_scan, stamp, kf)
+            t = self._bearing_match(sight, stamp)
+            if t is not None:
+                self._credit(t, sight, k, stamp, bool(robot_moved))
+                rep.bearing_only += 1
+                if t not in touched:
+                    touched.append(t)
         self._resolve_track_collisions(touched, stamp, rep)
         if cfg.ghost_decay and dt > 0.0:
             self._decay(areas, T_map_base, T_map_scan, beam_b_scan, beam_r_scan, stamp, dt, rep)
@@ -648,6 +701,14 @@ class Consciousness:
             behind = False
             if isl.physical_extent > pc.max_island:
                 rep.reject("too_big")  # a wall or furniture piece, never a leg of this class
+                continue
+            if (
+                len(isl) <= 2
+                and not pc.on_wall
+                and not (area.truncated["left"] or area.truncated["right"])
+                and isl.physical_extent > isl.extent + 0.15
+            ):
+                rep.reject("sliver")  # a point or two of something larger that the wedge clips
                 continue
             if cfg.corner_check:
                 if area.bottom_reliable:
@@ -906,6 +967,10 @@ class Consciousness:
                 match = float(np.mean(t.footprint.contains(cand.points, margin=0.5 * thr))) >= 0.5
             if not match and cand.footprint is not None:
                 match = bool(cand.footprint.contains(t.footprint.center[None, :])[0])
+            if not match and (cand.source == "ground_plane" or not t.evidence.has_points) and cand.ray_origin is not None:
+                # ground-plane ranging is uncertain along the line of sight (a few pixels of the bottom
+                # edge), not across it
+                match = _along_ray_close(cand.ray_origin, cand.center, t.footprint.center, thr)
             if not match and (partial or t.partial_only) and len(cand.points):
                 # a partial view of a large object: its points continue the object's (one of its
                 # typical shapes holds both)
@@ -915,6 +980,50 @@ class Consciousness:
             if match and d < best_d:
                 best, best_d = t, d
         return best
+
+    def _sighting(self, area: BoundingArea, T_map_scan: Pose2, stamp: float, kf: int) -> _Sighting:
+        cfg = self.cfg
+        pc = prior(area.label)
+        tol = float(cfg.range_tolerance)
+        apex = T_map_scan.transform_points(area.apex[None, :])[0]
+        b = area.bearing_center + T_map_scan.yaw
+        if area.bottom_reliable:
+            r_lo = max(area.near_range_lo * (1.0 - tol) - 0.3, 0.0)
+            hi = area.near_range_hi if np.isfinite(area.near_range_hi) else 3.0 * area.near_range_m
+            r_hi = hi * (1.0 + tol) + pc.length[2]
+        else:
+            r_lo, r_hi = 0.0, 12.0
+        cut = area.truncated["left"] or area.truncated["right"]
+        return _Sighting(
+            area.label, area.confidence, stamp, kf, apex, np.array([np.cos(b), np.sin(b)]), area.half_angle,
+            r_lo, r_hi, 0.0 if cut else 1.0,
+        )
+
+    def _bearing_match(self, sight: _Sighting, stamp: float) -> _Track | None:
+        best, best_off = None, math.inf
+        for t in self._tracks:
+            if t.label != sight.label or t.footprint is None or t.touched_stamp == stamp:
+                continue
+            if not sight.holds(t.footprint.center):
+                continue
+            v = t.footprint.center - sight.apex
+            off = abs(float(_angle_wrap(np.arctan2(v[1], v[0]) - np.arctan2(sight.direction[1], sight.direction[0]))))
+            if off < best_off:
+                best, best_off = t, off
+        return best
+
+    def _credit(self, t: _Track, sight: _Sighting, box: int, stamp: float, robot_moved: bool) -> None:
+        """A box that saw ``t`` without giving points: a presence frame and a bisector ray."""
+        new_frame = robot_moved or (stamp - t.last_frame_stamp >= float(self.cfg.stationary_frame_s) > 0.0)
+        if new_frame and t.touched_stamp != stamp:
+            t.presence, t.frames = update_presence(t.presence, t.frames, sight.confidence, self.cfg.frames_for_presence)
+            t.last_frame_stamp = stamp
+        t.evidence.add_ray(sight.apex, sight.direction, sight.weight, sight.kf, decay=float(self.cfg.rolling_average_weight))
+        t.touched_stamp = stamp
+        t.saw(stamp, box)
+        t.detections += 1
+        t.last_seen = max(t.last_seen, stamp)
+        t.refresh(self._known_free)
 
     def _create(self, cand: Candidate, stamp: float, kf: int) -> _Track:
         ev = ObjectEvidence()
@@ -1008,6 +1117,10 @@ class Consciousness:
                         # and together one object of the class
                         gap = a.prior.length[2] if (a.partial_only or b.partial_only) else thr
                         same = _contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=True)
+                    if not same and (not a.evidence.has_points or not b.evidence.has_points):
+                        gp, other = (a, b) if not a.evidence.has_points else (b, a)
+                        if len(gp.evidence.ray_origin):
+                            same = _along_ray_close(gp.evidence.ray_origin[-1], gp.footprint.center, other.footprint.center, thr)
                     if same and _co_observed(a, b):
                         same = False  # seen side by side through two boxes in one frame: two objects
                     if same:
@@ -1102,6 +1215,7 @@ class Consciousness:
         for t in self._tracks:
             t.evidence.transform(deltas)
             t.refresh()
+
 
     def _export(self, t: _Track) -> TrackedObject:
         fp = t.footprint

@@ -632,8 +632,10 @@ class Consciousness:
             cand = candidates[k]
             if cand is not None and cand.status != "collision":
                 continue
+            if area.truncated["left"] or area.truncated["right"]:
+                continue  # a box cut by the border does not say where its object is
             sight = self._sighting(area, T_map_scan, stamp, kf)
-            t = self._bearing_match(sight, stamp)
+            t = self._bearing_match(sight, stamp, area.near_range_m)
             if t is not None:
                 self._credit(t, sight, k, stamp, bool(robot_moved))
                 rep.bearing_only += 1
@@ -705,10 +707,15 @@ class Consciousness:
             if (
                 len(isl) <= 2
                 and not pc.on_wall
-                and not (area.truncated["left"] or area.truncated["right"])
                 and isl.physical_extent > isl.extent + 0.15
+                and (
+                    not (area.truncated["left"] or area.truncated["right"])
+                    or isl.physical_extent > 1.3 * pc.apparent_width_max
+                )
             ):
-                rep.reject("sliver")  # a point or two of something larger that the wedge clips
+                # a point or two of something larger that the wedge clips (for a box cut by the border,
+                # of something larger than the class)
+                rep.reject("sliver")
                 continue
             if cfg.corner_check:
                 if area.bottom_reliable:
@@ -737,7 +744,8 @@ class Consciousness:
                     elif not (area.truncated["top"] or area.truncated["bottom"]) and app_h > pc.height[2] * k_size + 0.1:
                         reason = "size_far"
                 leg_like = pc.legged and isl.physical_extent <= pc.leg_size_max
-                if reason is None and pc.solid_fraction > 0.0 and not leg_like:
+                cut = area.truncated["left"] or area.truncated["right"]  # its solid centre is unknown
+                if reason is None and pc.solid_fraction > 0.0 and not leg_like and not cut:
                     if self._see_through(area, pc, r_front, beam_b, beam_r):
                         reason = "corner_see_through"
                     elif self._grid_free(area, pc, r_front, T_map_scan, grid):
@@ -999,17 +1007,25 @@ class Consciousness:
             r_lo, r_hi, 0.0 if cut else 1.0,
         )
 
-    def _bearing_match(self, sight: _Sighting, stamp: float) -> _Track | None:
-        best, best_off = None, math.inf
+    def _bearing_match(self, sight: _Sighting, stamp: float, near: float) -> _Track | None:
+        """The tracked object of the sighting's class in its wedge: nearest the range its bottom edge
+        gives (relative), then nearest its bisector."""
+        best, best_cost = None, math.inf
         for t in self._tracks:
             if t.label != sight.label or t.footprint is None or t.touched_stamp == stamp:
+                continue
+            # only objects the LIDAR has confirmed (seen whole at least once, with points twice)
+            if t.partial_only or (t.evidence.has_points and t.evidence.observations < 2):
                 continue
             if not sight.holds(t.footprint.center):
                 continue
             v = t.footprint.center - sight.apex
             off = abs(float(_angle_wrap(np.arctan2(v[1], v[0]) - np.arctan2(sight.direction[1], sight.direction[0]))))
-            if off < best_off:
-                best, best_off = t, off
+            r_front = max(float(np.hypot(v[0], v[1])) - 0.5 * min(t.footprint.size_x, t.footprint.size_y), 0.0)
+            dr = abs(r_front - near) / max(near, 0.5) if math.isfinite(near) else 0.0
+            cost = dr + off / max(sight.half_angle, 1e-3)
+            if cost < best_cost:
+                best, best_cost = t, cost
         return best
 
     def _credit(self, t: _Track, sight: _Sighting, box: int, stamp: float, robot_moved: bool) -> None:

@@ -296,6 +296,37 @@ def test_footprint_not_extended_into_known_free_space():
     assert xs[False] == pytest.approx(2.5, abs=0.03)  # kept on the face
 
 
+def test_box_beyond_the_lidar_range_still_confirms_a_known_object():
+    """Bearing-only association: once the LIDAR has confirmed the shelf, boxes seen from beyond the
+    LIDAR's range (no points) still count as frames for it."""
+    shelf = Box(3.0, 0.0, 0.4, 1.0, 0.0, 0.0, 2.2)
+    c = make()
+    drive(c, [shelf], [("shelf", shelf)], line(3, x0=0.0))  # three frames within range
+    (o,) = c.objects
+    assert o.frames_seen == 3
+    reps = drive(c, [shelf], [("shelf", shelf)], line(4, x0=-1.5, step=0.05), t0=0.6)  # 4.3 m: no points
+    assert all(len(r.points_scan) == 0 or r.chosen[0] is None for r in reps)
+    assert sum(r.bearing_only for r in reps) == 4
+    (o,) = c.objects
+    assert o.frames_seen == 5 and o.presence >= 0.8
+
+
+def test_a_wall_point_in_a_box_is_a_sliver_not_an_object():
+    """A ball's box with a wall right behind it: the wall's point that the wedge clips is rejected as a
+    sliver of a long cluster; only the ball becomes an object."""
+    ball = Cylinder(1.6, 0.0, 0.11, 0.0, 0.22)
+    wall = Box(2.0, 0.5, 0.1, 3.0, 0.0, 0.0, 2.4)  # runs along x behind and beside the ball
+    c = make()
+    reps = []
+    for i, T in enumerate(line(6)):
+        d = detection("ball", ball, T, CAM, 0.9, pad_px=12)  # a loose box: the wall shows beside the ball
+        reps.append(c.update(detections([d], CAM), raycast([ball, wall], T, CAM), T, stamp=0.2 * i))
+    assert sum(r.rejected.get("sliver", 0) for r in reps) > 0
+    (o,) = by_label(c.visible_objects(), "ball")
+    assert math.hypot(o.pose.x - 1.6, o.pose.y) < 0.05
+    assert len(c.objects) == 1
+
+
 # -- corner problem ------------------------------------------------------------------------------------
 
 

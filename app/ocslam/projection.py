@@ -186,9 +186,11 @@ class CameraModel:
         u = np.asarray(u, dtype=np.float64).reshape(-1)
         cy = self.info.cy
         d = self.pixel_rays(np.stack([u, np.full_like(u, cy)], axis=1))
-        y_opt = self.R_base_optical[:, 1]
-        n = np.cross(np.broadcast_to(y_opt, d.shape), d)
-        line = np.cross(n, np.array([0.0, 0.0, 1.0]))[:, :2]
+        y = self.R_base_optical[:, 1]
+        # n = y × d, then the line direction n × e_z = (n_y, −n_x)
+        nx = y[1] * d[:, 2] - y[2] * d[:, 1]
+        ny = y[2] * d[:, 0] - y[0] * d[:, 2]
+        line = np.stack([ny, -nx], axis=1)
         norm = np.linalg.norm(line, axis=1, keepdims=True)
         fallback = d[:, :2] / np.maximum(np.linalg.norm(d[:, :2], axis=1, keepdims=True), 1e-12)
         line = np.where(norm > 1e-9, line / np.maximum(norm, 1e-12), fallback)
@@ -427,9 +429,15 @@ def bounding_areas(
 
 def camera_bound(camera: CameraModel, max_range_m: float) -> Polygon:
     """The camera's view on the LIDAR plane (``base_scan``): the wedge of the whole image out to ``max_range_m``."""
-    W = camera.info.width
-    b_left, b_right = (float(b) for b in camera.column_bearings_scan(np.array([0.0, float(W)])))
-    return _wedge_polygon(camera.apex_scan, b_left, b_right, 0.0, max_range_m)
+    cache = camera.__dict__.setdefault("_bound_cache", {})
+    poly = cache.get(float(max_range_m))
+    if poly is None:
+        W = camera.info.width
+        b_left, b_right = (float(b) for b in camera.column_bearings_scan(np.array([0.0, float(W)])))
+        poly = _wedge_polygon(camera.apex_scan, b_left, b_right, 0.0, max_range_m)
+        cache.clear()
+        cache[float(max_range_m)] = poly
+    return poly
 
 
 def camera_bound_bearings(camera: CameraModel) -> tuple[float, float]:

@@ -601,6 +601,7 @@ class Consciousness:
         candidates: list[Candidate | None] = []
         for k, area in enumerate(areas):
             idx = np.flatnonzero(member[:, k])
+            area.points = pts_all[idx]
             cand, isl = self._candidate(k, area, pts_all, idx, beam_b_apex, beam_r_apex, T_map_scan, T_map_base, grid, rep)
             rep.islands.append(isl)
             candidates.append(cand)

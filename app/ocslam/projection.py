@@ -251,7 +251,7 @@ class BoundingArea:
     with the bottom edge moved down/up by the pixel margin; ``far_range_m``: the wedge's far arc;
     ``bisector``: (2, 2) segment ``[apex, apex + far·dir_center]``; ``truncated``: which box edges touch
     the image border (``left``, ``right``, ``top``, ``bottom``); ``box_px``: the box clipped to the image,
-    in the camera's pixel grid.
+    in the camera's pixel grid; ``points``: the LIDAR points it received in the last update.
     """
 
     detection: Detection
@@ -267,6 +267,7 @@ class BoundingArea:
     bisector: FloatArray
     truncated: dict[str, bool] = field(default_factory=dict)
     box_px: FloatArray = field(default_factory=lambda: np.zeros(4))  # (x1, y1, x2, y2) clipped, camera pixels
+    points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # (K, 2) LIDAR points it received
 
     @property
     def label(self) -> str:
@@ -527,6 +528,7 @@ class SeedProjection:
     detection: Detection | None
     vertices: FloatArray  # (4, 2) near-left, near-right, far-right, far-left
     polygon: Polygon
+    points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # (K, 2) LIDAR points it received
 
     @property
     def near_midpoint(self) -> FloatArray:

@@ -110,6 +110,7 @@ class SeedConsciousness:
         t = np.array([T_odom_base.x, T_odom_base.y])
         for k, proj in enumerate(areas):
             idx = np.flatnonzero(member[:, k])
+            proj.points = points[idx]
             isl = islands_seed(points[idx], idx, float(cfg.island_threshold_m))
             islands.append(isl)
             if not isl:

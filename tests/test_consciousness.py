@@ -108,6 +108,7 @@ def test_island_nearest_the_bisector_becomes_the_object(mode):
         c.update(detections([det], CAM), scan, T, stamp=0.2 * i)
     rep = c.last_report
     assert len(rep.islands[0]) >= 2
+    assert len(rep.areas[0].points) == sum(len(i) for i in rep.islands[0])  # what the area received
     (o,) = c.objects
     assert o.label == "extinguisher"
     assert math.hypot(o.pose.x - 2.0, o.pose.y) < (0.05 if mode == "improved" else 0.25)

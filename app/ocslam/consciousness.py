@@ -404,6 +404,10 @@ class Consciousness:
                     "detections": t.detections,
                     "misses": t.misses,
                     "complete_views": t.complete_views,
+                    "footprint": None
+                    if t.footprint is None
+                    else [float(t.footprint.center[0]), float(t.footprint.center[1]), float(t.footprint.yaw),
+                          float(t.footprint.size_x), float(t.footprint.size_y)],
                     "evidence": t.evidence.state_dict(),
                 }
                 for t in self._tracks
@@ -437,7 +441,12 @@ class Consciousness:
                     misses=int(td.get("misses", 0)),
                     complete_views=int(td.get("complete_views", 0)),
                 )
-                t.refresh()
+                fp = td.get("footprint")
+                if fp is not None and len(fp) == 5 and all(math.isfinite(float(v)) for v in fp):
+                    # as estimated live (with the occupancy grid then at hand)
+                    t.footprint = Footprint(np.array([float(fp[0]), float(fp[1])]), float(fp[2]), float(fp[3]), float(fp[4]))
+                else:
+                    t.refresh()
                 tracks.append(t)
             kfs = {int(k): Pose2.from_array(v) for k, v in d.get("keyframes", {}).items()}
             seed = SeedConsciousness()

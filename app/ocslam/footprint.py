@@ -25,6 +25,7 @@ import math
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
 from app.ocslam.classes import ClassPrior
@@ -32,6 +33,8 @@ from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]
 NO_KEYFRAME = -1
+#: A voxel seen rarely and farther than this from every well-seen voxel is a stray (m).
+_STRAY_M = 0.3
 
 
 @dataclass
@@ -459,9 +462,14 @@ def estimate_footprint(
             g = g + (n * (w * np.sum(n * ev.ray_origin[use], axis=1))[:, None]).sum(axis=0)
         return Footprint(np.linalg.solve(H, g), yaw, a, b)
 
-    # points seen in a tenth of the object's best-seen voxel's observations or more (stray points that
-    # once joined the object — a background point between a pedestal table's legs — do not shape it)
-    keep = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
+    # stray points that once joined the object (a background point between a pedestal table's legs) do
+    # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
+    # well-seen voxel are ignored
+    strong = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
+    keep = strong.copy()
+    if np.any(~strong) and np.any(strong):
+        dist, _ = cKDTree(ev.points[strong]).query(ev.points[~strong], k=1)
+        keep[~strong] = dist <= _STRAY_M
     pts, hits = ev.points[keep], ev.hits[keep]
     th, lo, hi = min_area_rect(pts)
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])

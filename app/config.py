@@ -136,10 +136,8 @@ class CameraConfig:
     near_m: float = param(0.05, min=0.001, max=1.0, unit="m", help="render near plane")
     far_m: float = param(20.0, min=1.0, max=200.0, unit="m", help="render far plane")
     render_width: int = param(
-        0,
-        min=0,
-        max=1920,
-        help="render at this width (height keeps the aspect; the frame's K matches the rendered size); 0: full width",
+        320, min=0, max=1920,
+        help="render at this width and scale K (0: full width); 320 = the training renders; the detector reads 224",
     )
     async_render: bool = param(
         True, help="render in a separate process (overlaps with SLAM and the detector on the other core)"

@@ -458,9 +458,16 @@ class Pipeline:
                 self._camera_trigger()
         w = self.camera_worker
         if w is not None and w.pending and t + 1e-9 >= w.oldest_stamp() + self.cfg.camera.latency_s:
-            with self.timer.time("render"):  # only the time spent waiting for the render process
-                frame = w.collect()
-            self._camera_process(frame)
+            from app.render_worker import CameraWorkerError
+
+            try:
+                with self.timer.time("render"):  # only the time spent waiting for the render process
+                    frame = w.collect()
+            except CameraWorkerError as e:  # a lost frame, never a lost loop
+                log.error("%s", e)
+                self.counters.error("render")
+            else:
+                self._camera_process(frame)
 
     def _odometry_update(self) -> None:
         msg = self.odometry.update(self.sim.read_encoders())
@@ -700,11 +707,20 @@ class Pipeline:
             "exploration_complete": done is not None,
         }
 
+    def objects_in_map(self) -> list:
+        """The object map in the map frame. Seed mode keeps objects in ``odom``: like RViz with fixed frame
+        ``map``, they are shown (and scored) through the current ``map → odom`` transform."""
+        from dataclasses import replace
+
+        T = self.T_map_odom
+        return [replace(o, pose=T @ o.pose, frame_id="map") if o.frame_id == "odom" else o
+                for o in self.consciousness.objects]
+
     def object_report(self):
         from app.ocslam.evaluation import evaluate_objects
 
         return evaluate_objects(
-            self.consciousness.objects,
+            self.objects_in_map(),
             self.truth_objects_map(),
             self.truth_obstacles_map(),
             self.cfg.consciousness.presence_threshold,

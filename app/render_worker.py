@@ -71,21 +71,49 @@ def _worker_main(conn: Any, world: Any, cfg: Any, seed: int) -> None:
 class CameraWorker:
     """A render process with its own copy of the world (see the module docstring)."""
 
-    def __init__(self, world: Any, cfg: Any, seed: int = 0, *, start_timeout_s: float = 120.0) -> None:
+    #: pybullet's TinyRenderer never returns for a few exact camera poses (seen: one pose of a random
+    #: world; 1 mm away it renders in 20 ms). A late frame restarts the process and the pose is nudged.
+    JITTER_M = 2e-4
+
+    def __init__(self, world: Any, cfg: Any, seed: int = 0, *, start_timeout_s: float = 120.0,
+                 frame_timeout_s: float = 15.0) -> None:
+        self._args = (world, cfg, seed)
+        self.start_timeout_s = start_timeout_s
+        self.frame_timeout_s = frame_timeout_s
+        self._pending: deque[_Request] = deque()
+        self.restarts = 0
+        self._start()
+
+    def _start(self) -> None:
         ctx = mp.get_context("spawn")  # never fork a process that holds a pybullet client
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_worker_main, args=(child, world, cfg, seed), daemon=True,
-                                 name="ocslam-camera")
+        self._proc = ctx.Process(target=_worker_main, args=(child, *self._args), daemon=True, name="ocslam-camera")
         self._proc.start()
         child.close()
-        self._pending: deque[_Request] = deque()
-        if not self._conn.poll(start_timeout_s):
+        if not self._conn.poll(self.start_timeout_s):
             self.close()
             raise CameraWorkerError("the camera render process did not start")
         kind, payload = self._conn.recv()
         if kind != "ready":
             self.close()
             raise CameraWorkerError(f"the camera render process failed to start:\n{payload}")
+
+    def _restart(self) -> None:
+        """Kill a stuck render process, start a new one and re-send what was pending (the first nudged)."""
+        log.warning("camera render process stuck on %s: restarting it", self._pending[0] if self._pending else None)
+        self._proc.kill()
+        self._proc.join(timeout=5)
+        self._conn.close()
+        self.restarts += 1
+        self._start()
+        pending = list(self._pending)
+        if pending:
+            r = pending[0]
+            pending[0] = _Request(r.stamp, (r.pose[0] + self.JITTER_M, r.pose[1] + self.JITTER_M, r.pose[2]),
+                                  r.width, r.height, r.segmentation)
+        self._pending = deque(pending)
+        for r in pending:
+            self._conn.send(r)
 
     @property
     def pending(self) -> int:
@@ -100,12 +128,17 @@ class CameraWorker:
         self._conn.send(req)
         self._pending.append(req)
 
-    def collect(self, timeout_s: float = 60.0):
-        """The oldest requested frame (blocks until it is rendered)."""
+    def collect(self, timeout_s: float | None = None):
+        """The oldest requested frame (blocks until it is rendered; a stuck render is retried once)."""
         if not self._pending:
             raise CameraWorkerError("collect() without a pending request")
+        timeout_s = self.frame_timeout_s if timeout_s is None else timeout_s
         if not self._conn.poll(timeout_s):
-            raise CameraWorkerError(f"no frame from the render process within {timeout_s:.0f} s")
+            self._restart()
+            if not self._conn.poll(timeout_s):
+                stuck = self._pending.popleft()
+                self._restart()
+                raise CameraWorkerError(f"no frame from the render process within {timeout_s:.0f} s ({stuck})")
         kind, payload = self._conn.recv()
         self._pending.popleft()
         if kind != "frame":

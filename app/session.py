@@ -61,13 +61,9 @@ def objects_json(pipe: "Pipeline", *, all_objects: bool = False) -> dict[str, An
     """The object map in the map frame (objects at presence ≥ threshold unless ``all_objects``)."""
     thr = pipe.cfg.consciousness.presence_threshold
     out = []
-    for o in pipe.consciousness.objects:
+    for o in pipe.objects_in_map():
         if not all_objects and o.presence < thr:
             continue
-        if o.frame_id == "odom":  # seed mode keeps objects in odom: export them in map
-            from dataclasses import replace
-
-            o = replace(o, pose=pipe.T_map_odom @ o.pose, frame_id="map")
         out.append(object_to_detection3d(o, pipe.time, "map"))
     return {"frame_id": "map", "presence_threshold": thr, "stamp": pipe.time, "detections": out}
 

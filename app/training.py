@@ -63,6 +63,7 @@ class TrainOptions:
     runs_dir: Path = field(default_factory=lambda: PROJECT_ROOT / "runs" / "detector")
     name: str = "train"
     config_dir: Path = field(default_factory=lambda: PROJECT_ROOT / ".yolo")
+    init_weights: Path | None = None  # start from one of our own earlier checkpoints (never a download)
     fp16_weights: bool = True  # store weights as float16 in the ONNX file (half the size, same inference)
     extra: dict[str, Any] = field(default_factory=dict)  # further ultralytics train() arguments
 
@@ -206,6 +207,11 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
         deterministic=False,
         verbose=True,
     )
+    if opts.init_weights:
+        w = Path(opts.init_weights)
+        if not w.is_file():
+            raise FileNotFoundError(f"no checkpoint at {w}")
+        args["pretrained"] = str(w.resolve())  # ultralytics loads matching weights from this local file
     if opts.hours:
         args["time"] = float(opts.hours)
     args.update(opts.extra)
@@ -275,6 +281,7 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
             "batch": opts.batch,
             "patience": opts.patience,
             "time_budget_h": opts.hours,
+            "initialised_from": str(opts.init_weights) if opts.init_weights else "random (from the model yaml)",
             "training_time_h": round(train_s / 3600.0, 3),
             "device": f"cpu ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)",
             "torch": str(torch.__version__),

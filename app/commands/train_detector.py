@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="dataset folder (with data.yaml) from `ocslam dataset`; rendered with the default recipe if missing",
     )
     p.add_argument("--model", default="yolov8n.yaml", help="ultralytics model yaml (no pretrained weights): yolov8n.yaml, yolo11n.yaml")
+    p.add_argument("--init-weights", type=Path, default=None,
+                   help="start from an earlier checkpoint of ours (e.g. runs/detector/v1/weights/best.pt); never a download")
     p.add_argument("--imgsz", type=int, default=224, help="training image size (paper: 224)")
     p.add_argument("--epochs", type=int, default=60, help="maximum epochs")
     p.add_argument("--hours", type=float, default=1.0, help="time budget in hours (fits the epochs to it; 0: off)")
@@ -59,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
         cache=not args.no_cache,
         close_mosaic=args.close_mosaic,
         name=args.name,
+        init_weights=args.init_weights,
     )
     if args.out is not None:
         opts.out_model = args.out

@@ -260,7 +260,7 @@ class SceneLayers:
         T = p.fusion.T_frame_base
         if rep is None or T is None:
             return
-        T_frame_scan = T @ p.T_base_scan
+        T_frame_scan = getattr(rep, "T_frame_scan", None) or (T @ p.T_base_scan)
         # seed mode keeps objects in odom: show them in the map frame
         if p.cfg.consciousness.mode == "seed":
             T_frame_scan = p.T_map_odom @ T_frame_scan

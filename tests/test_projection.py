@@ -17,6 +17,7 @@ from app.ocslam.projection import (
     camera_bound,
     ground_plane_point,
     seed_assign_points,
+    seed_bounding_areas,
     seed_camera_angles,
     seed_camera_projection,
     seed_project_points,
@@ -227,6 +228,17 @@ def test_seed_points_may_belong_to_several_areas_and_containment_is_strict():
     assert m[1].tolist() == [True, False]
     vertex = a.vertices[0][None, :]
     assert not seed_assign_points(vertex, [a]).any()  # on the boundary: not strictly inside
+
+
+def test_seed_areas_are_in_the_640x480_camera_pixels_whatever_the_render_size():
+    # the same box seen in a 320x240 render and in the original's 640x480 image: the same area
+    half = Detections(0.0, 320, 240, (Detection(110.0, 75.0, 210.0, 160.0, 0, 0.9),))
+    full = Detections(0.0, 640, 480, (Detection(220.0, 150.0, 420.0, 320.0, 0, 0.9),))
+    (a,) = seed_bounding_areas(half)
+    (b,) = seed_bounding_areas(full)
+    np.testing.assert_allclose(a.vertices, b.vertices)
+    np.testing.assert_allclose(b.vertices, seed_projection(220.0, 150.0, 420.0, 320.0).vertices)
+    assert a.detection is half.boxes[0]
 
 
 def test_seed_scan_points_use_strict_camera_angles_and_skip_inf():

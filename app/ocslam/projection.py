@@ -568,10 +568,24 @@ def seed_camera_angles() -> tuple[float, float]:
     return float(a.min()), float(a.max())
 
 
+SEED_CAMERA_SIZE = (640, 480)  # the original camera's image, the pixels its constants are in
+
+
 def seed_bounding_areas(detections: Detections) -> list[SeedProjection]:
-    """The original's areas, from the integer ``/yolo_boxes`` matrix (one per box, in order)."""
+    """The original's areas, from the integer ``/yolo_boxes`` matrix (one per box, in order).
+
+    The original's constants are in the 640×480 camera image's pixels, so boxes of an image rendered at
+    another size (the app renders 320×240 by default) are first scaled to 640×480, as the original's
+    YOLO node would have reported them.
+    """
     out = []
     rows = detections.yolo_boxes()
+    sx = SEED_CAMERA_SIZE[0] / detections.image_width if detections.image_width > 0 else 1.0
+    sy = SEED_CAMERA_SIZE[1] / detections.image_height if detections.image_height > 0 else 1.0
+    if sx != 1.0 or sy != 1.0:
+        rows = np.array(
+            [[b.x1 * sx, b.y1 * sy, b.x2 * sx, b.y2 * sy] for b in detections.boxes], dtype=np.float64
+        ).reshape(-1, 4).astype(np.int32)
     for det, row in zip(detections.boxes, rows):
         x1, y1, x2, y2 = (float(v) for v in row[:4])
         out.append(seed_projection(x1, y1, x2, y2, det))

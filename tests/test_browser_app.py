@@ -27,7 +27,7 @@ DETECTOR = "yolo" if (ASSETS / "models" / "detector.onnx").is_file() else "oracl
 
 @pytest.fixture(scope="module")
 def app():
-    cfg = Config.load(None, [f"detector.kind={DETECTOR}", "server.port=0", "sim.speed=3"])
+    cfg = Config.load(None, [f"detector.kind={DETECTOR}", "server.port=0", "sim.speed=2"])
     a = OcslamApp(cfg).start()
     a.submit(lambda p: p.follow_route("tour"))
     try:
@@ -59,6 +59,28 @@ def _click_slider(page, label: str, fraction: float) -> None:
     track = _label_root(page, label).locator(".mantine-Slider-track")
     b = track.bounding_box()
     page.mouse.click(b["x"] + fraction * b["width"], b["y"] + b["height"] / 2)
+
+
+def _scan_points_base(app) -> np.ndarray:
+    """(N, 2) LIDAR returns of the latest scan in base_footprint."""
+    scan = app.pipeline.last_scan
+    ok = scan.valid_mask()
+    a, r = scan.angles[ok], scan.ranges[ok]
+    return app.pipeline.T_base_scan.transform_points(np.c_[r * np.cos(a), r * np.sin(a)])
+
+
+def _clearance_ahead(app, half_width: float = 0.15) -> float:
+    """Free distance straight ahead of the robot (m): the nearest return in its swept corridor."""
+    pts = _scan_points_base(app)
+    ahead = pts[(pts[:, 0] > 0.0) & (np.abs(pts[:, 1]) < half_width)]
+    return float(ahead[:, 0].min()) if len(ahead) else np.inf
+
+
+def _open_direction(app) -> float:
+    """Bearing (rad, base frame) of the longest return: where a short drive is sure to be free."""
+    pts = _scan_points_base(app)
+    far = pts[np.argmax(np.hypot(pts[:, 0], pts[:, 1]))]
+    return float(np.arctan2(far[1], far[0]))
 
 
 def _shot_std(path: Path) -> np.ndarray:
@@ -108,6 +130,7 @@ def test_slider_reaches_the_config_and_changes_the_tracker(app, pages) -> None:
     mode.click()
     page.get_by_role("option", name="seed").click()
     wait_for(lambda: app.cfg.consciousness.mode == "seed", what="seed mode on the server")
+    app.submit(lambda p: p.follow_route("tour"))  # drive past the objects again
     wait_for(lambda: any(o.frame_id == "odom" for o in app.pipeline.consciousness.objects), timeout=120,
              what="an object tracked the seed way (odom frame)")
     _label_root(page, "mode").click()
@@ -156,6 +179,24 @@ def test_hold_button_drives_and_teleop_keys_work(app, pages) -> None:
     page.get_by_role("tab", name="Drive").click()
     app.submit(lambda p: p.stop_autonomy("test"))
     wait_for(lambda: app.pipeline.drive_mode == "idle", what="autonomy stopped")
+    # teleop keys: 'j' turns left in place; turn until the way ahead is free (wherever the tour left us)
+    focus_canvas(page)
+    yaw0 = app.pipeline.sim.true_pose().yaw
+    for _ in range(6):
+        page.keyboard.press("j")
+        time.sleep(0.2)
+    wait_for(lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what="'j' to turn the robot")
+    page.keyboard.press("k")  # stop
+    for _ in range(60):  # small turns, each stopped by 'k', until the corridor ahead is clear
+        wait_for(lambda: app.pipeline.cmd.angular_z == 0.0, what="'k' to stop the robot")
+        time.sleep(0.4)  # a fresh scan from where the robot stands
+        if _clearance_ahead(app) > 0.8:
+            break
+        page.keyboard.press("j")
+        time.sleep(0.15)
+        page.keyboard.press("k")
+    assert _clearance_ahead(app) > 0.8
+    # the hold-to-drive button moves the robot forward while pressed
     start = app.pipeline.sim.true_pose()
     btn = page.get_by_role("button", name="Forward")
     btn.hover()
@@ -164,13 +205,6 @@ def test_hold_button_drives_and_teleop_keys_work(app, pages) -> None:
     page.mouse.up()
     wait_for(lambda: app.pipeline.sim.true_pose().distance(start) > 0.1, what="hold-to-drive to move the robot")
     assert start.between(app.pipeline.sim.true_pose()).x > 0.1
-    focus_canvas(page)
-    yaw0 = app.pipeline.sim.true_pose().yaw
-    for _ in range(6):
-        page.keyboard.press("j")
-        time.sleep(0.2)
-    wait_for(lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what="'j' to turn the robot")
-    page.keyboard.press("Space")
 
 
 def test_click_on_the_floor_navigates_there(app, pages) -> None:
@@ -178,9 +212,9 @@ def test_click_on_the_floor_navigates_there(app, pages) -> None:
     p = app.pipeline
     app.submit(lambda pp: pp.stop_autonomy("test"))
     wait_for(lambda: p.drive_mode in ("idle", "teleop"), what="no autonomy")
-    # a free, known point 0.8 m ahead of the robot in the map
-    T = p.T_map_base
-    goal = T @ Pose2(0.8, 0.0, 0.0)
+    # a free, known point 0.8 m from the robot, towards its longest LIDAR return
+    bearing = _open_direction(app)
+    goal = p.T_map_base @ Pose2(0.8 * np.cos(bearing), 0.8 * np.sin(bearing), 0.0)
     for c in app.server.get_clients().values():
         c.camera.position = (goal.x - 1.0, goal.y - 1.0, 3.0)  # viser: position first, then look_at
         c.camera.look_at = (goal.x, goal.y, 0.0)

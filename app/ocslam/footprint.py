@@ -437,6 +437,9 @@ def estimate_footprint(
     4. The centre is the least-squares crossing of the bisector rays, constrained to the interval the
        points and sizes allow on each axis.
 
+    Seen only through boxes cut by the image border (no bisector ray), the points are kept as they
+    are, except that a single face (a line of points) still gets its depth (step 3).
+
     A legged object seen as one small support on the box's centre line (a pedestal table) keeps its
     centre on that support. ``known_free`` (``(N, 2)`` points → ``(N,)`` True where the occupancy grid
     knows free space) vetoes an extension into space the LIDAR has seen empty: the points were then the
@@ -479,11 +482,13 @@ def estimate_footprint(
     views = ev.ray_origin
     side = [_one_sided(views, center0, axes[i], d_obs[i] / 2) for i in range(2)]
     depth_axis = -1
+    one_face = False
     if len(views):
         long_ax = int(np.argmax(d_obs))
         if d_obs[long_ax] >= 0.15 and d_obs[1 - long_ax] <= 0.35 * d_obs[long_ax]:
             # one face (a line of points), even seen obliquely: its normal is the depth axis
             depth_axis = 1 - long_ax
+            one_face = True
         else:
             u = center0[None, :] - views
             u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
@@ -498,11 +503,15 @@ def estimate_footprint(
             w_app = float(np.median(vals))
 
     support = pc.legged and ev.support_obs > ev.corner_obs and max(d_obs) <= pc.leg_size_max * 1.5
-    if not np.any(ev.ray_weight > 1e-6) and len(views):
+    cut_only = not np.any(ev.ray_weight > 1e-6) and len(views) > 0
+    if cut_only and not one_face:
         # seen only through boxes cut by the image border: the rest is outside the image, anywhere
         # from the border round to the robot's side, so nothing is extrapolated; fragments of one
         # object join later when they meet (Consciousness)
         return Footprint(center0, th, float(max(d_obs[0], 0.05)), float(max(d_obs[1], 0.05)))
+    # A single face seen through cut boxes (a sofa's end filling the frame) still hides the object's
+    # depth behind it: the face's extent is kept as seen and the depth is extrapolated below.
+    support = support and not cut_only
     if depth_axis < 0 or support:
         # no viewpoint (or a central support): the points are the object's centre
         a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
@@ -512,7 +521,7 @@ def estimate_footprint(
         return Footprint(center0, th, float(size[0]), float(size[1]))
 
     # tangential extent: the observed one if it covers the box's apparent width, else the apparent width
-    tan_complete = np.isfinite(w_app) and d_obs[tan_axis] >= 0.75 * w_app
+    tan_complete = cut_only or (np.isfinite(w_app) and d_obs[tan_axis] >= 0.75 * w_app)
     if tan_complete:
         t_tan = float(d_obs[tan_axis])
     elif np.isfinite(w_app):

@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python scripts/screenshot.py [--out docs/img/app.png] [--sim-seconds 110]
+    .venv/bin/python scripts/screenshot.py [--out docs/img/app.png] [--sim-seconds 110]   # needs the [test] extra
 
 Starts the app on a free port with the YOLO detector, drives the apartment tour for ``--sim-seconds``
 of simulated time, then opens the page in Debian's chromium (Playwright, no ``playwright install``),
@@ -12,7 +12,7 @@ switches to the top-down view and the Objects tab and saves the page.
 from __future__ import annotations
 
 import argparse
-import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -20,18 +20,8 @@ from app.config import Config
 from app.server import OcslamApp
 
 ROOT = Path(__file__).resolve().parents[1]
-FLAGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-quic",
-    "--no-first-run",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--use-gl=angle",
-]
+sys.path.insert(0, str(ROOT / "tests"))
+from browser import CHROMIUM_FLAGS, chromium_path  # noqa: E402  (the browser tests' chromium setup)
 
 
 def main() -> None:
@@ -41,7 +31,7 @@ def main() -> None:
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--height", type=int, default=760)
     args = ap.parse_args()
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    exe = chromium_path()
     if exe is None:
         raise SystemExit("chromium not found: sudo apt-get install chromium")
     from playwright.sync_api import sync_playwright
@@ -53,7 +43,7 @@ def main() -> None:
             time.sleep(0.5)
         app.submit(lambda p: p.stop_autonomy("screenshot"))
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=exe, args=FLAGS)
+            browser = pw.chromium.launch(executable_path=exe, args=CHROMIUM_FLAGS)
             page = browser.new_page(viewport={"width": args.width, "height": args.height})
             page.goto(app.url, wait_until="domcontentloaded")
             page.get_by_role("button", name="Top-down view").wait_for(timeout=60_000)

@@ -83,6 +83,16 @@ def _open_direction(app) -> float:
     return float(np.arctan2(far[1], far[0]))
 
 
+def _turn_with_key(app, page, key: str, *, what: str) -> None:
+    """Press a teleop turn key a few times on the canvas and wait until the robot's heading changed."""
+    focus_canvas(page)
+    yaw0 = app.pipeline.sim.true_pose().yaw
+    for _ in range(6):
+        page.keyboard.press(key)
+        time.sleep(0.2)
+    wait_for(lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what=what)
+
+
 def _shot_std(path: Path) -> np.ndarray:
     import cv2
 
@@ -180,12 +190,7 @@ def test_hold_button_drives_and_teleop_keys_work(app, pages) -> None:
     app.submit(lambda p: p.stop_autonomy("test"))
     wait_for(lambda: app.pipeline.drive_mode == "idle", what="autonomy stopped")
     # teleop keys: 'j' turns left in place; turn until the way ahead is free (wherever the tour left us)
-    focus_canvas(page)
-    yaw0 = app.pipeline.sim.true_pose().yaw
-    for _ in range(6):
-        page.keyboard.press("j")
-        time.sleep(0.2)
-    wait_for(lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what="'j' to turn the robot")
+    _turn_with_key(app, page, "j", what="'j' to turn the robot")
     page.keyboard.press("k")  # stop
     for _ in range(60):  # small turns, each stopped by 'k', until the corridor ahead is clear
         wait_for(lambda: app.pipeline.cmd.angular_z == 0.0, what="'k' to stop the robot")
@@ -246,12 +251,7 @@ def test_views_objects_and_metrics_panels(app, pages) -> None:
 def test_two_clients_share_the_world_and_one_leaving_stops_nothing(app, pages) -> None:
     first, second = pages
     wait_for(lambda: len(app.server.get_clients()) >= 2, what="two browser clients")
-    focus_canvas(second)
-    yaw0 = app.pipeline.sim.true_pose().yaw
-    for _ in range(6):
-        second.keyboard.press("l")
-        time.sleep(0.2)
-    wait_for(lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what="teleop from the second tab")
+    _turn_with_key(app, second, "l", what="teleop from the second tab")
     n = len(app.server.get_clients())
     t0 = app.pipeline.time
     first.close()

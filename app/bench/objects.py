@@ -25,7 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--route", default=None, help="route (default: sim.route, 'tour')")
     p.add_argument("--worlds", type=int, default=0, help="run N random worlds instead of --world")
-    p.add_argument("--world-seed", type=int, default=1000, help="first random world seed (with --worlds)")
+    p.add_argument("--world-seed", type=int, default=99000,
+                   help="first random world seed (with --worlds); 99000… are worlds the detector never saw "
+                        "(its training used 1000…1039)")
     p.add_argument("--duration", type=float, default=1500.0, help="max sim seconds per world")
     p.add_argument("--json", action="store_true")
 

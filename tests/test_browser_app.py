@@ -63,10 +63,7 @@ def _click_slider(page, label: str, fraction: float) -> None:
 
 def _scan_points_base(app) -> np.ndarray:
     """(N, 2) LIDAR returns of the latest scan in base_footprint."""
-    scan = app.pipeline.last_scan
-    ok = scan.valid_mask()
-    a, r = scan.angles[ok], scan.ranges[ok]
-    return app.pipeline.T_base_scan.transform_points(np.c_[r * np.cos(a), r * np.sin(a)])
+    return app.pipeline.T_base_scan.transform_points(app.pipeline.last_scan.points())
 
 
 def _clearance_ahead(app, half_width: float = 0.15) -> float:

@@ -502,7 +502,6 @@ def estimate_footprint(
         if len(vals):
             w_app = float(np.median(vals))
 
-    support = pc.legged and ev.support_obs > ev.corner_obs and max(d_obs) <= pc.leg_size_max * 1.5
     cut_only = not np.any(ev.ray_weight > 1e-6) and len(views) > 0
     if cut_only and not one_face:
         # seen only through boxes cut by the image border: the rest is outside the image, anywhere
@@ -511,7 +510,9 @@ def estimate_footprint(
         return Footprint(center0, th, float(max(d_obs[0], 0.05)), float(max(d_obs[1], 0.05)))
     # A single face seen through cut boxes (a sofa's end filling the frame) still hides the object's
     # depth behind it: the face's extent is kept as seen and the depth is extrapolated below.
-    support = support and not cut_only
+    support = (
+        not cut_only and pc.legged and ev.support_obs > ev.corner_obs and max(d_obs) <= pc.leg_size_max * 1.5
+    )
     if depth_axis < 0 or support:
         # no viewpoint (or a central support): the points are the object's centre
         a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])

@@ -334,6 +334,13 @@ def _wedge_polygon(apex: FloatArray, b_left: float, b_right: float, r_near: floa
     return poly
 
 
+def _box_scale(detections: Detections, width: float, height: float) -> tuple[float, float]:
+    """``(sx, sy)`` from the detections' image size to ``width × height`` (1, 1 if the size is unknown)."""
+    if detections.image_width > 0 and detections.image_height > 0:
+        return width / detections.image_width, height / detections.image_height
+    return 1.0, 1.0
+
+
 def _scale_box(det: Detection, sx: float, sy: float) -> Detection:
     if sx == 1.0 and sy == 1.0:
         return det
@@ -414,9 +421,7 @@ def bounding_areas(
     sx = sy = 1.0
     if isinstance(detections, Detections):
         boxes = detections.boxes
-        if detections.image_width > 0 and detections.image_height > 0:
-            sx = camera.info.width / detections.image_width
-            sy = camera.info.height / detections.image_height
+        sx, sy = _box_scale(detections, camera.info.width, camera.info.height)
     else:
         boxes = detections
     out = []
@@ -579,14 +584,9 @@ def seed_bounding_areas(detections: Detections) -> list[SeedProjection]:
     YOLO node would have reported them.
     """
     out = []
-    rows = detections.yolo_boxes()
-    sx = SEED_CAMERA_SIZE[0] / detections.image_width if detections.image_width > 0 else 1.0
-    sy = SEED_CAMERA_SIZE[1] / detections.image_height if detections.image_height > 0 else 1.0
-    if sx != 1.0 or sy != 1.0:
-        rows = np.array(
-            [[b.x1 * sx, b.y1 * sy, b.x2 * sx, b.y2 * sy] for b in detections.boxes], dtype=np.float64
-        ).reshape(-1, 4).astype(np.int32)
-    for det, row in zip(detections.boxes, rows):
+    sx, sy = _box_scale(detections, *SEED_CAMERA_SIZE)
+    seen = Detections(detections.stamp, *SEED_CAMERA_SIZE, tuple(_scale_box(b, sx, sy) for b in detections.boxes))
+    for det, row in zip(detections.boxes, seen.yolo_boxes()):
         x1, y1, x2, y2 = (float(v) for v in row[:4])
         out.append(seed_projection(x1, y1, x2, y2, det))
     return out

@@ -168,6 +168,8 @@ class ServerConfig:
     host: str = param("127.0.0.1", help="bind address ('0.0.0.0' exposes the robot to the network)")
     port: int = param(8080, min=0, max=65535, help="port (0: any free port)")
     allow_origins: list = param([], help="extra allowed WebSocket Origins (besides the server's own)")
+    require_token: bool = param(True, help="on a non-loopback host, require the random access token printed at start"
+                                " (`ocslam run --no-token` turns it off)")
 
 
 SECTIONS: dict[str, type] = {

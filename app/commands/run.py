@@ -53,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, help="headless: run directory for config.yaml, summary.json, map, objects")
     p.add_argument("--host", default=None, help="bind address (default 127.0.0.1; 0.0.0.0 exposes the robot)")
     p.add_argument("--port", type=int, default=None, help="port (default 8080; 0 = any free port)")
+    p.add_argument("--no-token", action="store_true",
+                   help="with a non-loopback --host: no access token (anyone who can reach the port drives the robot)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -62,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
         cfg.set("server.host", args.host)
     if args.port is not None:
         cfg.set("server.port", args.port)
+    if getattr(args, "no_token", False):
+        cfg.set("server.require_token", False)
     if args.headless:
         return run_headless(cfg, route=args.route, explore=args.explore, duration=args.duration, out=args.out,
                             quiet=args.quiet)

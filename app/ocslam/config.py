@@ -214,6 +214,9 @@ class DetectorConfig:
     nms_iou: float = param(0.5, min=0.05, max=0.95, step=0.05, help="class-aware NMS IoU threshold", live=True)
     threads: int = param(2, min=1, max=16, help="onnxruntime intra-op threads")
     input_size: int = param(0, min=0, max=1280, help="model input width (0: from the model file)")
+    verify_hash: bool = param(
+        True, help="refuse a model whose sha256 differs from its model card (assets/models/*.yaml)"
+    )
     oracle_min_pixels: int = param(60, min=1, max=100000, help="oracle: minimum visible pixels for a box")
     oracle_min_visible_fraction: float = param(0.25, min=0.0, max=1.0, help="oracle: minimum visible fraction")
     oracle_confidence_mean: float = param(0.85, min=0.0, max=1.0, help="oracle: mean confidence")

@@ -21,6 +21,7 @@ Example:
 from __future__ import annotations
 
 import ast
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,8 @@ __all__ = [
     "DetectorError",
     "Letterbox",
     "MAKE_MODEL_COMMAND",
+    "find_model_card",
+    "verify_model_hash",
     "CLASS_COLORS",
     "letterbox",
     "decode_output",
@@ -176,6 +179,87 @@ def decode_output(
     return boxes[idx], score[idx], cls[idx]
 
 
+#: Where the committed models and their cards live (a model here must be described by a card).
+MODELS_DIR = Path(__file__).resolve().parents[2] / "assets" / "models"
+
+
+def file_sha256(path: Path) -> str:
+    """Hex sha256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _card_entries(card: dict) -> list[dict]:
+    """The model entries of a card: ``model`` and each of ``variants`` (dicts with ``file``, ``sha256``)."""
+    entries = []
+    if isinstance(card.get("model"), dict):
+        entries.append(card["model"])
+    variants = card.get("variants")
+    if isinstance(variants, list):
+        entries.extend(v for v in variants if isinstance(v, dict))
+    return entries
+
+
+def find_model_card(model: Path) -> tuple[Path, dict] | None:
+    """The card that describes ``model`` and its entry (``file``, ``sha256``, ...), or None.
+
+    Looks at ``<stem>.yaml`` beside the model first, then at every ``*.yaml`` in the model's folder, for
+    a ``model`` or ``variants[]`` entry whose ``file`` is the model's file name. Unreadable YAML files
+    are skipped (they describe nothing).
+    """
+    import yaml
+
+    model = Path(model)
+    folder = model.parent
+    first = model.with_suffix(".yaml")
+    candidates = ([first] if first.is_file() else []) + sorted(p for p in folder.glob("*.yaml") if p != first)
+    for card_path in candidates:
+        try:
+            card = yaml.safe_load(card_path.read_text())
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            continue
+        if not isinstance(card, dict):
+            continue
+        for entry in _card_entries(card):
+            if str(entry.get("file", "")) == model.name:
+                return card_path, entry
+    return None
+
+
+def verify_model_hash(model: Path) -> str | None:
+    """Check ``model``'s sha256 against its card; return the hash, or None if no card describes it.
+
+    Raises :class:`DetectorError` (one line naming both hashes) on a mismatch, if the card's entry
+    has no sha256, or if the model lies in the project's ``assets/models`` and no card there names it.
+    """
+    model = Path(model)
+    found = find_model_card(model)
+    if found is None:
+        if model.resolve().parent == MODELS_DIR:
+            raise DetectorError(
+                f"detector model {model} is not described by any model card in {MODELS_DIR} "
+                f"(add its sha256 to the card, or set detector.verify_hash: false)"
+            )
+        return None
+    card_path, entry = found
+    expected = str(entry.get("sha256") or "").strip().lower()
+    actual = file_sha256(model)
+    if not expected:
+        raise DetectorError(
+            f"model card {card_path} gives no sha256 for {model.name}; refusing {model} (sha256 {actual}); "
+            f"set detector.verify_hash: false to load it anyway"
+        )
+    if actual != expected:
+        raise DetectorError(
+            f"detector model {model} does not match its card {card_path}: sha256 {actual}, card says {expected} "
+            f"(the file was changed or replaced; re-make it with ocslam train-detector, or set detector.verify_hash: false)"
+        )
+    return actual
+
+
 def _parse_metadata(meta: dict[str, str]) -> tuple[tuple[str, ...] | None, int | None]:
     """Class names and training input width from ultralytics' ONNX metadata (``names``, ``imgsz``)."""
     names: tuple[str, ...] | None = None
@@ -202,7 +286,9 @@ class Detector:
     ``cfg.threads`` and ``cfg.input_size`` are read once.
 
     Raises :class:`DetectorError` (naming the path and the command that makes a model) if the model
-    is missing, corrupt, or not a detector of :data:`CLASS_NAMES`.
+    is missing, corrupt, or not a detector of :data:`CLASS_NAMES`, and (one line naming both hashes)
+    if its sha256 differs from its model card's, unless ``cfg.verify_hash`` is false
+    (:func:`verify_model_hash`).
     """
 
     def __init__(self, cfg: DetectorConfig, model_path: Path | str | None = None) -> None:
@@ -211,6 +297,10 @@ class Detector:
         self.model_path = path
         if not path.is_file():
             raise DetectorError(f"detector model not found: {path}. Make one with: {MAKE_MODEL_COMMAND}")
+        if path.stat().st_size == 0:
+            raise DetectorError(f"detector model {path} is empty. Make one with: {MAKE_MODEL_COMMAND}")
+        #: sha256 checked against the model card (None: not checked, or no card describes the file)
+        self.sha256: str | None = verify_model_hash(path) if getattr(cfg, "verify_hash", True) else None
         import onnxruntime as ort
 
         opts = ort.SessionOptions()

@@ -35,6 +35,7 @@ BENCHES: dict[str, tuple[str, str]] = {
     "objects": ("app.bench.objects", "the object map against ground truth (the paper's results table)"),
     "ui": ("app.bench.ui", "server CPU and bytes per tick per client"),
     "loop": ("app.bench.loop", "the complete loop's per-stage time and real-time factor"),
+    "soak": ("app.bench.soak", "hours of headless exploration over random worlds: exceptions, RSS growth, counts"),
 }
 
 

@@ -1,0 +1,216 @@
+"""``ocslam bench soak``: the headless loop for hours of sim time, exploring random worlds with YOLO on.
+
+    ocslam bench soak --sim-hours 2 [--world-minutes 10] [--max-wall-minutes 90] [--out soak.json] [--json]
+
+One :class:`~app.pipeline.Pipeline` per world (``random_world(seed)``, seeds from ``--seed``), frontier
+exploration until no frontier is left or ``--world-minutes`` of sim time have passed, then the next
+world, until ``--sim-hours`` of sim time in all. Reported:
+
+* **exceptions** (goal 0): uncaught exceptions out of ``Pipeline.step`` (the world is then abandoned)
+  plus the errors the loop caught and counted itself (``counters.errors``: detector, SLAM, render…);
+* **RSS** of this process and its children (the render worker) in MiB: at start (after the first
+  world's first ``--warmup`` sim seconds, so the model and the first map are loaded), at the same point
+  in every later world, and at the end; growth = last / first − 1 (goal < 10 %);
+* per world: tracked objects against the objects in the world, keyframes, the frame-skip counters,
+  real-time factor.
+
+``--out FILE`` is rewritten after every world, so a run that is stopped still leaves its figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from app.bench.common import print_json, table
+from app.commands.run import add_config_arguments, config_from_args
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_config_arguments(p)
+    p.add_argument("--sim-hours", type=float, default=2.0, help="total sim time")
+    p.add_argument("--world-minutes", type=float, default=10.0, help="sim minutes per world at most")
+    p.add_argument("--warmup", type=float, default=60.0, help="sim seconds into each world where RSS is sampled")
+    p.add_argument("--seed0", type=int, default=99100, help="first random_world seed")
+    p.add_argument("--max-wall-minutes", type=float, default=None, help="stop (and say so) after this much wall time")
+    p.add_argument("--out", type=Path, default=None, help="write the JSON result here after every world")
+    p.add_argument("--json", action="store_true")
+
+
+def rss_mib(pid: int | None = None) -> float:
+    """Resident set size of ``pid`` (default: this process) plus all its descendants, MiB (Linux /proc)."""
+    pid = os.getpid() if pid is None else pid
+    total = 0
+    stack, seen = [pid], set()
+    while stack:
+        p = stack.pop()
+        if p in seen:
+            continue
+        seen.add(p)
+        try:
+            for line in Path(f"/proc/{p}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1]) * 1024
+                    break
+            for task in Path(f"/proc/{p}/task").iterdir():
+                kids = (task / "children").read_text().split()
+                stack.extend(int(k) for k in kids)
+        except (OSError, ValueError):
+            continue
+    return total / 2**20
+
+
+def _sum(d: dict[str, int]) -> int:
+    return int(sum(int(v) for v in d.values()))
+
+
+def soak_world(cfg, seed: int, *, sim_budget_s: float, warmup_s: float, deadline: float | None) -> dict[str, Any]:
+    """Explore ``random_world(seed)`` for at most ``sim_budget_s``; the world's figures."""
+    from app.pipeline import Pipeline
+    from app.worlds import random_world
+
+    world = random_world(seed)
+    t0 = time.perf_counter()
+    pipe = Pipeline(cfg, world=world)
+    res: dict[str, Any] = {"seed": seed, "world_objects": len(world.objects), "exceptions": 0, "exception_messages": []}
+    try:
+        if pipe.detector_error and cfg.detector.kind != "none":
+            raise RuntimeError(pipe.detector_error)
+        pipe.explore()
+        rss_warm = None
+        end = "world time budget"
+        while pipe.time < sim_budget_s:
+            try:
+                pipe.step()
+            except Exception as e:  # counted, and the world is abandoned: its state is not to be trusted
+                res["exceptions"] += 1
+                res["exception_messages"].append(f"{type(e).__name__}: {e}"[:300])
+                end = "exception"
+                break
+            if rss_warm is None and pipe.time >= warmup_s:
+                rss_warm = rss_mib()
+            if pipe.drive_mode == "idle" and pipe.nav_status:
+                end = pipe.nav_status
+                break
+            if deadline is not None and time.perf_counter() > deadline:
+                end = "wall-time limit"
+                break
+        wall = time.perf_counter() - t0
+        c = pipe.counters
+        res.update({
+            "sim_s": round(pipe.time, 1),
+            "wall_s": round(wall, 1),
+            "real_time_factor": round(pipe.time / wall, 2) if wall > 0 else None,
+            "end": end,
+            "rss_warm_mib": round(rss_warm, 1) if rss_warm is not None else None,
+            "rss_end_mib": round(rss_mib(), 1),
+            "tracked_objects": len(pipe.consciousness.objects),
+            "objects_in_map": len(pipe.objects_in_map()),
+            "keyframes": len(pipe.slam.pose_graph().nodes),
+            "scans": c.scans,
+            "images": c.images,
+            "detections": c.detections,
+            "fused_frames": c.fused_frames,
+            "skipped_frames": dict(c.skipped_frames),
+            "slam_skipped": dict(getattr(pipe.slam, "skipped", {})),
+            "loop_errors": dict(c.errors),
+            "coverage": round(pipe.coverage(), 3),
+        })
+    finally:
+        pipe.close()
+    return res
+
+
+def soak(cfg, *, sim_hours: float, world_minutes: float, warmup_s: float, seed0: int,
+         max_wall_minutes: float | None = None, out: Path | None = None) -> dict[str, Any]:
+    t0 = time.perf_counter()
+    deadline = t0 + 60.0 * max_wall_minutes if max_wall_minutes else None
+    target = 3600.0 * sim_hours
+    result: dict[str, Any] = {
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "sim_hours_target": sim_hours,
+        "detector": cfg.detector.kind,
+        "cores": os.cpu_count(),
+        "rss_process_start_mib": round(rss_mib(), 1),
+        "worlds": [],
+    }
+    done_s, seed = 0.0, seed0
+    while done_s < target - 1e-6:
+        if deadline is not None and time.perf_counter() > deadline:
+            break
+        budget = min(60.0 * world_minutes, target - done_s)
+        w = soak_world(cfg, seed, sim_budget_s=budget, warmup_s=min(warmup_s, budget), deadline=deadline)
+        result["worlds"].append(w)
+        done_s += w.get("sim_s", 0.0)
+        seed += 1
+        _summarise(result, done_s, time.perf_counter() - t0, target)
+        if out is not None:
+            from app.config import atomic_write_text
+
+            atomic_write_text(out, json.dumps(result, indent=2) + "\n")
+        if w.get("sim_s", 0.0) <= 0.0:
+            break  # nothing advances: no point in looping forever
+    _summarise(result, done_s, time.perf_counter() - t0, target)
+    return result
+
+
+def _summarise(result: dict[str, Any], done_s: float, wall_s: float, target: float) -> None:
+    ws = result["worlds"]
+    warm = [w["rss_warm_mib"] for w in ws if w.get("rss_warm_mib") is not None]
+    result.update({
+        "sim_s": round(done_s, 1),
+        "sim_hours": round(done_s / 3600.0, 3),
+        "wall_s": round(wall_s, 1),
+        "real_time_factor": round(done_s / wall_s, 2) if wall_s > 0 else None,
+        "complete": done_s >= target - 1e-6,
+        "exceptions": sum(w["exceptions"] for w in ws),
+        "loop_errors": sum(_sum(w.get("loop_errors", {})) for w in ws),
+        "rss_start_mib": warm[0] if warm else None,
+        "rss_end_mib": ws[-1].get("rss_end_mib") if ws else None,
+        "rss_last_warm_mib": warm[-1] if warm else None,
+        "rss_growth_pct": round(100.0 * (warm[-1] / warm[0] - 1.0), 2) if len(warm) >= 2 else None,
+        "rss_max_mib": max((w.get("rss_end_mib") or 0.0 for w in ws), default=None),
+        "skipped_frames": _merge([w.get("skipped_frames", {}) for w in ws]),
+        "slam_skipped": _merge([w.get("slam_skipped", {}) for w in ws]),
+    })
+
+
+def _merge(ds: list[dict[str, int]]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for d in ds:
+        for k, v in d.items():
+            out[k] = out.get(k, 0) + int(v)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = config_from_args(args)
+    if args.detector is None and not any(o.startswith("detector.kind=") for o in args.overrides):
+        cfg.set("detector.kind", "yolo")
+    for name in ("sim_hours", "world_minutes"):
+        v = getattr(args, name)
+        if not (v == v and 0 < v < float("inf")):
+            from app.config import ConfigError
+
+            raise ConfigError(f"--{name.replace('_', '-')} must be a positive number, got {v}")
+    res = soak(cfg, sim_hours=args.sim_hours, world_minutes=args.world_minutes, warmup_s=args.warmup,
+               seed0=args.seed0, max_wall_minutes=args.max_wall_minutes, out=args.out)
+    if args.json:
+        print_json(res)
+        return 0 if res["exceptions"] == 0 else 1
+    rows = [(w["seed"], w.get("sim_s"), w.get("real_time_factor"), w.get("end", "")[:28], w["exceptions"],
+             _sum(w.get("loop_errors", {})), f"{w.get('tracked_objects')}/{w['world_objects']}", w.get("keyframes"),
+             _sum(w.get("skipped_frames", {})), w.get("rss_warm_mib"), w.get("rss_end_mib")) for w in res["worlds"]]
+    table(["seed", "sim s", "RTF", "end", "exc", "loop err", "objects/world", "keyframes", "skipped", "RSS warm MiB",
+           "RSS end MiB"], rows, title=f"Soak: {res['sim_hours']} of {res['sim_hours_target']} sim h in {res['wall_s']} s wall")
+    print(f"exceptions: {res['exceptions']} uncaught + {res['loop_errors']} caught (goal 0)")
+    print(f"RSS: {res['rss_start_mib']} MiB at start → {res['rss_last_warm_mib']} MiB at the same point of the last world "
+          f"({res['rss_growth_pct']} %, goal < 10 %); {res['rss_end_mib']} MiB at the end")
+    print(f"frame skips: {res['skipped_frames']}; SLAM skips: {res['slam_skipped']}")
+    if not res["complete"]:
+        print("incomplete: stopped by --max-wall-minutes before --sim-hours of sim time")
+    return 0 if res["exceptions"] == 0 else 1

@@ -1,0 +1,97 @@
+"""Association (the paper's assumption 5): which tracked object a candidate or a box is.
+
+:func:`associate` matches a frame's candidate (points, a ground-plane placement) with a tracked object
+of its class; :func:`sighting` and :func:`bearing_match` let a box that gave no object still see an
+object the LIDAR has confirmed (bearing-only association).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from app.ocslam.candidate import Candidate
+from app.ocslam.classes import prior
+from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.projection import BoundingArea
+from app.ocslam.se2 import Pose2
+from app.ocslam.tracks import Sighting, Track, along_ray_close, angle_wrap, contiguous, min_distance
+
+
+def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: ConsciousnessConfig) -> Track | None:
+    """The tracked object of the candidate's class it is (paper's assumption 5), or ``None``.
+
+    Nearest centre within ``tracking_threshold_m``, or the object's footprint (grown by half the
+    threshold) holding the candidate's centre or half its points, or the candidate's footprint
+    holding the object's centre; ground-plane placements along the line of sight; partial views
+    that continue the object's points. Never an object another box of this frame already updated."""
+    thr = float(cfg.tracking_threshold_m)
+    best, best_d = None, math.inf
+    c = cand.center
+    partial = cand.ray_weight == 0.0
+    for t in tracks:
+        if t.label != cand.label or t.footprint is None:
+            continue
+        if t.boxes.get(stamp, cand.area_index) != cand.area_index:
+            continue  # already seen in this frame through another box: another instance
+        d = float(np.linalg.norm(t.footprint.center - c))
+        match = d < thr or bool(t.footprint.contains(c[None, :], margin=0.5 * thr)[0])
+        if not match and len(cand.points):
+            match = float(np.mean(t.footprint.contains(cand.points, margin=0.5 * thr))) >= 0.5
+        if not match and cand.footprint is not None:
+            match = bool(cand.footprint.contains(t.footprint.center[None, :])[0])
+        if not match and (cand.source == "ground_plane" or not t.evidence.has_points) and cand.ray_origin is not None:
+            # ground-plane ranging is uncertain along the line of sight (a few pixels of the bottom
+            # edge), not across it
+            match = along_ray_close(cand.ray_origin, cand.center, t.footprint.center, thr)
+        if not match and (partial or t.partial_only) and len(cand.points):
+            # a partial view of a large object: its points continue the object's (one of its
+            # typical shapes holds both)
+            match = contiguous(cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True)
+            if match:
+                d = thr + float(min_distance(cand.points, t.evidence.points))
+        if match and d < best_d:
+            best, best_d = t, d
+    return best
+
+
+def sighting(area: BoundingArea, T_map_scan: Pose2, stamp: float, kf: int, cfg: ConsciousnessConfig) -> Sighting:
+    """A box that gave no object, as a wedge in the map frame with the range its bottom edge allows."""
+    pc = prior(area.label)
+    tol = float(cfg.range_tolerance)
+    apex = T_map_scan.transform_points(area.apex[None, :])[0]
+    b = area.bearing_center + T_map_scan.yaw
+    if area.bottom_reliable:
+        r_lo = max(area.near_range_lo * (1.0 - tol) - 0.3, 0.0)
+        hi = area.near_range_hi if np.isfinite(area.near_range_hi) else 3.0 * area.near_range_m
+        r_hi = hi * (1.0 + tol) + pc.length[2]
+    else:
+        r_lo, r_hi = 0.0, 12.0
+    cut = area.truncated["left"] or area.truncated["right"]
+    return Sighting(
+        area.label, area.confidence, stamp, kf, apex, np.array([np.cos(b), np.sin(b)]), area.half_angle,
+        r_lo, r_hi, 0.0 if cut else 1.0,
+    )
+
+
+def bearing_match(sight: Sighting, tracks: list[Track], stamp: float, near: float) -> Track | None:
+    """The tracked object of the sighting's class in its wedge: nearest the range its bottom edge
+    gives (relative), then nearest its bisector."""
+    best, best_cost = None, math.inf
+    for t in tracks:
+        if t.label != sight.label or t.footprint is None or t.touched_stamp == stamp:
+            continue
+        # only objects the LIDAR has confirmed (seen whole at least once, with points twice)
+        if t.partial_only or (t.evidence.has_points and t.evidence.observations < 2):
+            continue
+        if not sight.holds(t.footprint.center):
+            continue
+        v = t.footprint.center - sight.apex
+        off = abs(float(angle_wrap(np.arctan2(v[1], v[0]) - np.arctan2(sight.direction[1], sight.direction[0]))))
+        r_front = max(float(np.hypot(v[0], v[1])) - 0.5 * min(t.footprint.size_x, t.footprint.size_y), 0.0)
+        dr = abs(r_front - near) / max(near, 0.5) if math.isfinite(near) else 0.0
+        cost = dr + off / max(sight.half_angle, 1e-3)
+        if cost < best_cost:
+            best, best_cost = t, cost
+    return best

@@ -1,0 +1,315 @@
+"""Tracked objects (improved mode): the record of one object, its evidence and its soft decision.
+
+A :class:`Track` holds an object's :class:`~app.ocslam.footprint.ObjectEvidence` (points, bisector
+rays, ground-plane centres, all in the ``map`` frame), its presence confidence (paper §2.5.4) and the
+frames and boxes it was seen in. :func:`create_track`, :func:`update_track`, :func:`credit_track`
+and :func:`merge_tracks` are the only ways evidence enters a track; :func:`export_track` turns it into
+the published :class:`~app.ocslam.messages.TrackedObject`.
+
+Also here: the small geometric predicates the association and the collision rules share.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from app.ocslam.candidate import Candidate
+from app.ocslam.classes import ClassPrior, prior
+from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.footprint import NO_KEYFRAME, Footprint, ObjectEvidence, estimate_footprint, min_area_rect
+from app.ocslam.messages import OccupancyGrid, TrackedObject
+from app.ocslam.presence import initial_presence, update_presence
+from app.ocslam.se2 import Pose2
+
+FloatArray = NDArray[np.float64]
+FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
+
+
+@dataclass(eq=False)
+class Track:
+    """One tracked object (``map`` frame)."""
+
+    id: int
+    label: str
+    presence: float
+    frames: int
+    confidence: float
+    source: str
+    evidence: ObjectEvidence
+    created: float
+    last_seen: float
+    last_frame_stamp: float
+    footprint: Footprint | None = None
+    detections: int = 1
+    touched_stamp: float = -math.inf
+    near_range: float = math.inf  # this frame's projection distance (collision rule)
+    complete_views: int = 0  # observations through boxes not cut by the image border
+    misses: int = 0  # frames in clear view (in range, not occluded) without a box of its class
+    boxes: dict[float, int] = field(default_factory=dict)  # recent frames (stamp → box index) it was seen in
+
+    def saw(self, stamp: float, box: int, keep: int = 256) -> None:
+        self.boxes[stamp] = box
+        if len(self.boxes) > keep:
+            for k in sorted(self.boxes)[: len(self.boxes) - keep]:
+                del self.boxes[k]
+
+    @property
+    def partial_only(self) -> bool:
+        """Only ever seen through boxes cut by the image border: possibly a fragment of a larger object."""
+        return self.complete_views == 0
+
+    @property
+    def prior(self) -> ClassPrior:
+        return prior(self.label)
+
+    def refresh(self, known_free: FreeFn | None = None) -> None:
+        fp = estimate_footprint(self.evidence, self.prior, known_free=known_free)
+        if fp is not None:
+            self.footprint = fp
+
+
+@dataclass(eq=False)
+class Sighting:
+    """A box that gave no object in its frame (beyond the LIDAR's range, or no consistent island):
+    its class, its wedge in the object frame and the range its bottom edge allows. A tracked object
+    of its class that it holds was seen again (bearing-only association)."""
+
+    label: str
+    confidence: float
+    stamp: float
+    kf: int
+    apex: FloatArray
+    direction: FloatArray  # the bisector
+    half_angle: float
+    r_lo: float
+    r_hi: float
+    weight: float  # bisector ray weight (0: box cut by the image border)
+    apparent_width: float = float("nan")
+
+    def holds(self, center: FloatArray, margin: float = 0.02) -> bool:
+        v = np.asarray(center, dtype=np.float64) - self.apex
+        r = float(np.hypot(v[0], v[1]))
+        ang = abs(float(angle_wrap(np.arctan2(v[1], v[0]) - np.arctan2(self.direction[1], self.direction[0]))))
+        return ang <= self.half_angle + margin and self.r_lo <= r <= self.r_hi
+
+
+# -- shared geometric predicates ----------------------------------------------------------------------
+
+
+def angle_wrap(a):
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def overlap_fraction(a: Footprint, b: Footprint) -> float:
+    """Intersection area over the smaller footprint's area."""
+    pa, pb = a.polygon, b.polygon
+    inter = shapely.area(shapely.intersection(pa, pb))
+    small = max(min(pa.area, pb.area), 1e-9)
+    return float(inter / small)
+
+
+def min_distance(a: FloatArray, b: FloatArray) -> float:
+    """Smallest distance between two ``(N, 2)`` / ``(M, 2)`` point sets (inf if either is empty)."""
+    if len(a) == 0 or len(b) == 0:
+        return math.inf
+    return float(cKDTree(b).query(a, k=1)[0].min())
+
+
+def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typical: bool = False) -> bool:
+    """True if two point sets lie within ``gap_m`` and together fit one object of the class (one of
+    its typical shapes with ``typical``)."""
+    if len(a) == 0 or len(b) == 0 or min_distance(a, b) > gap_m:
+        return False
+    _th, lo, hi = min_area_rect(np.vstack([a, b]))
+    d = hi - lo
+    if typical:
+        return pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25)
+    return pc.fits(float(d[0]), float(d[1]), tolerance=0.1)
+
+
+def grid_free_fn(grid: OccupancyGrid | None) -> FreeFn | None:
+    """``(N, 2)`` points (grid frame) → True where the occupancy grid knows free space."""
+    if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
+        return None
+
+    def free(points: FloatArray) -> NDArray[np.bool_]:
+        cells = grid.world_to_cell(points)
+        inside = (cells[:, 0] >= 0) & (cells[:, 0] < grid.height) & (cells[:, 1] >= 0) & (cells[:, 1] < grid.width)
+        out = np.zeros(len(points), dtype=bool)
+        v = grid.data[cells[inside, 0], cells[inside, 1]].astype(np.int64)
+        out[inside] = (v >= 0) & (v < 20)
+        return out
+
+    return free
+
+
+def along_ray_close(origin: FloatArray, a: FloatArray, b: FloatArray, thr: float, rel: float = 0.25) -> bool:
+    """True if ``b`` is within ``thr`` of ``a`` across the line of sight from ``origin``, and within
+    ``max(thr, rel·range)`` along it (the uncertainty of ground-plane ranging)."""
+    v = a - origin
+    r = float(np.hypot(v[0], v[1]))
+    if r < 1e-6:
+        return float(np.hypot(*(b - a))) < thr
+    u = v / r
+    d = b - a
+    along = abs(float(d @ u))
+    across = abs(float(d[0] * u[1] - d[1] * u[0]))
+    return across < thr and along < max(thr, rel * r)
+
+
+def co_observed(a: Track, b: Track) -> bool:
+    """True if two objects were seen in the same frame through different boxes: two instances."""
+    common = a.boxes.keys() & b.boxes.keys()
+    return any(a.boxes[k] != b.boxes[k] for k in common)
+
+
+# -- evidence in, objects out ---------------------------------------------------------------------------
+
+
+def _new_frame(t: Track, stamp: float, robot_moved: bool, cfg: ConsciousnessConfig) -> bool:
+    return robot_moved or (stamp - t.last_frame_stamp >= float(cfg.stationary_frame_s) > 0.0)
+
+
+def credit_track(
+    t: Track, sight: Sighting, box: int, stamp: float, robot_moved: bool, cfg: ConsciousnessConfig, known_free: FreeFn | None
+) -> None:
+    """A box that saw ``t`` without giving points: a presence frame and a bisector ray."""
+    if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
+        t.presence, t.frames = update_presence(t.presence, t.frames, sight.confidence, cfg.frames_for_presence)
+        t.last_frame_stamp = stamp
+    t.evidence.add_ray(sight.apex, sight.direction, sight.weight, sight.kf, decay=float(cfg.rolling_average_weight))
+    t.touched_stamp = stamp
+    t.saw(stamp, box)
+    t.detections += 1
+    t.last_seen = max(t.last_seen, stamp)
+    t.refresh(known_free)
+
+
+def add_evidence(ev: ObjectEvidence, cand: Candidate, kf: int, cfg: ConsciousnessConfig) -> None:
+    """A candidate's points, ground-plane centre and bisector ray into ``ev``."""
+    w = float(cfg.rolling_average_weight)
+    if len(cand.points):
+        ev.add_points(cand.points, kf)
+        ev.observations += 1
+        ev.leg_obs += int(cand.legs)
+        if cand.support is True:
+            ev.support_obs += 1
+        elif cand.support is False:
+            ev.corner_obs += 1
+    if cand.ground_center is not None:
+        ev.add_ground_center(cand.ground_center, w, kf)
+    if cand.ray_origin is not None and cand.ray_dir is not None:
+        ev.add_ray(
+            cand.ray_origin, cand.ray_dir, cand.ray_weight, kf, decay=w, apparent_width=cand.apparent_width, open_side=cand.open_side
+        )
+
+
+def create_track(
+    track_id: int, cand: Candidate, stamp: float, kf: int, cfg: ConsciousnessConfig, known_free: FreeFn | None
+) -> Track:
+    """A new object from a candidate (presence ``c/F``)."""
+    ev = ObjectEvidence()
+    add_evidence(ev, cand, kf, cfg)
+    t = Track(
+        id=track_id,
+        label=cand.label,
+        presence=initial_presence(cand.confidence, cfg.frames_for_presence),
+        frames=1,
+        confidence=cand.confidence,
+        source=cand.source,
+        evidence=ev,
+        created=stamp,
+        last_seen=stamp,
+        last_frame_stamp=stamp,
+        touched_stamp=stamp,
+    )
+    t.saw(stamp, cand.area_index)
+    t.complete_views = int(cand.ray_weight > 0.0)
+    t.refresh(known_free)
+    if t.footprint is None:
+        t.footprint = cand.footprint
+    return t
+
+
+def update_track(
+    t: Track, cand: Candidate, stamp: float, kf: int, robot_moved: bool, cfg: ConsciousnessConfig, known_free: FreeFn | None
+) -> bool:
+    """Add a candidate's evidence to a track; False if its points were left out (shape inconsistent)."""
+    pc = t.prior
+    consistent = True
+    if len(cand.points) and t.evidence.has_points:
+        _th, lo, hi = min_area_rect(np.vstack([t.evidence.points, cand.points]))
+        d = hi - lo
+        if not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
+            # the union would not fit one object of this class: keep the track's shape, use the ray only
+            cand = dataclasses.replace(cand, points=np.zeros((0, 2)), ground_center=None)
+            consistent = False
+    add_evidence(t.evidence, cand, kf, cfg)
+    if cand.source == "lidar_legs" or (cand.source == "lidar_island" and t.source == "ground_plane"):
+        t.source = cand.source
+    if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
+        t.presence, t.frames = update_presence(t.presence, t.frames, cand.confidence, cfg.frames_for_presence)
+        t.last_frame_stamp = stamp
+    t.touched_stamp = stamp
+    t.saw(stamp, cand.area_index)
+    t.confidence = cand.confidence
+    t.detections += 1
+    t.complete_views += int(cand.ray_weight > 0.0)
+    t.last_seen = stamp
+    t.refresh(known_free)
+    return consistent
+
+
+def merge_tracks(keep: Track, drop: Track, cfg: ConsciousnessConfig, known_free: FreeFn | None) -> None:
+    """``keep`` absorbs ``drop`` (same object): evidence united, frames added (they were seen in
+    different frames), presence re-evaluated with the soft decision."""
+    F = max(int(cfg.frames_for_presence), 1)
+    keep.evidence.absorb(drop.evidence)
+    frames = min(F, keep.frames + drop.frames)
+    conf = min(keep.confidence, drop.confidence)
+    keep.presence = max(keep.presence, drop.presence, min(conf, 1.0) * frames / F)
+    keep.frames = frames
+    keep.detections += drop.detections
+    keep.complete_views += drop.complete_views
+    keep.misses += drop.misses
+    for k, v in drop.boxes.items():
+        keep.boxes.setdefault(k, v)
+    keep.last_seen = max(keep.last_seen, drop.last_seen)
+    keep.last_frame_stamp = max(keep.last_frame_stamp, drop.last_frame_stamp)
+    keep.created = min(keep.created, drop.created)
+    keep.refresh(known_free)
+
+
+def export_track(t: Track, kf_poses: dict[int, Pose2]) -> TrackedObject:
+    """The published object (``map`` frame), anchored to its latest keyframe."""
+    fp = t.footprint
+    assert fp is not None
+    pose = Pose2(float(fp.center[0]), float(fp.center[1]), float(angle_wrap(fp.yaw)))
+    kf = t.evidence.latest_keyframe()
+    anchor = kf if kf != NO_KEYFRAME and kf in kf_poses else None
+    T_kf_obj = kf_poses[anchor].inverse() @ pose if anchor is not None else None
+    return TrackedObject(
+        id=t.id,
+        label=t.label,
+        pose=pose,
+        size_x=float(fp.size_x),
+        size_y=float(fp.size_y),
+        size_z=float(t.prior.height[1]),
+        presence=float(t.presence),
+        detection_confidence=float(t.confidence),
+        frames_seen=int(t.frames),
+        source=t.source,
+        frame_id="map",
+        anchor_keyframe=anchor,
+        T_keyframe_object=T_kf_obj,
+        last_seen=float(t.last_seen),
+        footprint=fp.corners,
+    )

@@ -98,6 +98,10 @@ class SimConfig:
     light_direction: list = param([0.3, -0.4, 1.0], help="render light direction [x, y, z] (world frame)")
     light_ambient: float = param(0.6, min=0.0, max=1.0, help="render ambient light coefficient")
     light_diffuse: float = param(0.5, min=0.0, max=1.0, help="render diffuse light coefficient")
+    renderer: str = param(
+        "auto", choices=("auto", "egl", "tiny"),
+        help="camera renderer: auto = pybullet's EGL plugin (Mesa llvmpipe) where it loads, else TinyRenderer",
+    )
 
 
 @dataclass
@@ -170,6 +174,10 @@ class ServerConfig:
     allow_origins: list = param([], help="extra allowed WebSocket Origins (besides the server's own)")
     require_token: bool = param(True, help="on a non-loopback host, require the random access token printed at start"
                                 " (`ocslam run --no-token` turns it off)")
+    runs_dir: str = param("runs", help="the only directory the web UI saves or loads sessions, maps and configs in"
+                          " (relative: to the project root)")
+    worlds_dirs: list = param(["worlds", "assets/worlds"], help="directories whose *.yaml worlds the web UI offers"
+                              " (relative: to the project root)")
 
 
 SECTIONS: dict[str, type] = {

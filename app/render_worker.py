@@ -1,7 +1,7 @@
 """Camera rendering in a separate process, so it overlaps with SLAM and the detector on the other core.
 
-pybullet's TinyRenderer is the loop's most expensive stage (tens of ms per frame, pure pixel fill on one
-core). :class:`CameraWorker` keeps a second pybullet client with the same world in a child process. The
+Rendering (pybullet's EGL plugin on Mesa's llvmpipe, or TinyRenderer) is the loop's most expensive stage
+(tens of ms per frame, pixel fill on the CPU). :class:`CameraWorker` keeps a second pybullet client with the same world in a child process. The
 loop *requests* a frame at its stamp with the robot's true pose and *collects* it a fixed sim-time latency
 later (``camera.latency_s``, like a real camera driver's), blocking only if the worker is late. Frames are
 therefore processed at the same sim step whatever the machine's load: runs stay deterministic.
@@ -40,17 +40,26 @@ class _Request:
     segmentation: bool
 
 
-def _worker_main(conn: Any, world: Any, cfg: Any, seed: int) -> None:
-    """Child process: a SimWorld that only renders."""
+def _worker_main(conn: Any, world: Any, cfg: Any, seed: int, warmup: tuple[int, int] | None = None) -> None:
+    """Child process: a SimWorld that only renders. Its C-level stdout goes to /dev/null (the EGL plugin
+    prints at every frame); the first frame (shader compilation, ~0.5 s) is rendered before "ready"."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.close(devnull)
+    except OSError:
+        pass
     try:
         from app.sim_world import SimWorld
 
         sim = SimWorld(world, cfg, seed=seed)
+        if warmup is not None:
+            sim.render_camera(*warmup)
     except BaseException:  # noqa: BLE001
         conn.send(("error", traceback.format_exc()))
         return
-    conn.send(("ready", None))
+    conn.send(("ready", {"renderer": sim.renderer, "renderer_note": sim.renderer_note}))
     while True:
         try:
             req = conn.recv()
@@ -76,8 +85,17 @@ class CameraWorker:
     JITTER_M = 2e-4
 
     def __init__(self, world: Any, cfg: Any, seed: int = 0, *, start_timeout_s: float = 120.0,
-                 frame_timeout_s: float = 15.0) -> None:
-        self._args = (world, cfg, seed)
+                 frame_timeout_s: float = 15.0, warmup: tuple[int, int] | None = None) -> None:
+        """``warmup``: a ``(width, height)`` frame rendered (and dropped) before the worker reports ready.
+        :attr:`renderer` / :attr:`renderer_note`: what the process renders with (``"egl"`` or ``"tiny"``)."""
+        from app.sim_world import resolve_renderer
+
+        # probes EGL once here (the verdict reaches the child through the environment); a forced but
+        # unavailable EGL fails here, with the reason
+        resolve_renderer(getattr(cfg.sim, "renderer", "auto"))
+        self._args = (world, cfg, seed, warmup)
+        self.renderer = "tiny"
+        self.renderer_note = ""
         self.start_timeout_s = start_timeout_s
         self.frame_timeout_s = frame_timeout_s
         self._pending: deque[_Request] = deque()
@@ -97,6 +115,9 @@ class CameraWorker:
         if kind != "ready":
             self.close()
             raise CameraWorkerError(f"the camera render process failed to start:\n{payload}")
+        if isinstance(payload, dict):
+            self.renderer = str(payload.get("renderer", "tiny"))
+            self.renderer_note = str(payload.get("renderer_note", ""))
 
     def _restart(self) -> None:
         """Kill a stuck render process, start a new one and re-send what was pending (the first nudged)."""

@@ -12,8 +12,11 @@ Design (measured choices, see ``ocslam bench sim``):
   collision cylinder (radius ``robot.footprint_radius_m``, ``sim.robot_height_m`` tall) into anything is
   refused (the robot stalls, its wheels slip), so it never passes through walls or objects. Deterministic
   for a seed; no contact dynamics to tune or to explode.
-- **LIDAR**: one ``rayTestBatch`` from the ``base_scan`` frame of the URDF; **camera**: TinyRenderer from
-  ``camera_optical_frame``, with depth and a segmentation of ground-truth object ids.
+- **LIDAR**: one ``rayTestBatch`` from the ``base_scan`` frame of the URDF; **camera**: pybullet's EGL
+  renderer plugin (OpenGL; Mesa's llvmpipe without a GPU) where it loads, else TinyRenderer
+  (``sim.renderer``: ``auto | egl | tiny``), from ``camera_optical_frame``, with depth and a segmentation
+  of ground-truth object ids. The EGL plugin is first probed in a child process (a broken EGL stack
+  exits the process that loads it), once per process tree.
 
 Every message is stamped with sim time (``SimWorld.time``). All noise comes from seeded
 ``numpy.random.Generator`` streams (one per source). Ground truth (:meth:`true_pose`, :meth:`ground_truth_objects`, ...) is for
@@ -28,9 +31,18 @@ Example:
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import importlib.util
+import json
+import logging
 import math
+import os
+import subprocess
+import sys
+import threading
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,7 +55,9 @@ from app.robot_model import RobotModel
 from app.world_models import build_model_pybullet, get_model, resolve_colors
 from app.worlds import World
 
-__all__ = ["CameraFrame", "SimWorld", "pose3"]
+__all__ = ["CameraFrame", "RENDERERS", "RendererError", "SimWorld", "pose3", "probe_egl", "resolve_renderer"]
+
+log = logging.getLogger(__name__)
 
 # collision filter groups: rays and the robot's collision query only see WORLD bodies
 _G_WORLD, _G_ROBOT, _G_FLOOR, _G_CHECK = 1, 2, 4, 8
@@ -68,6 +82,191 @@ class CameraFrame:
     T_world_camera: NDArray[np.float64] | None = None
 
 
+# ----------------------------------------------------------------------------------------------
+# renderer choice
+# ----------------------------------------------------------------------------------------------
+#: ``sim.renderer`` values: EGL where it loads (auto), EGL or an error (egl), TinyRenderer (tiny)
+RENDERERS = ("auto", "egl", "tiny")
+#: environment: the EGL plugin's path (default: pybullet's ``eglRenderer`` module); a missing file
+#: makes the EGL load fail (the tests' failure case)
+EGL_PLUGIN_ENV = "OCSLAM_EGL_PLUGIN"
+#: environment: the probe's verdict, passed on to child processes (render worker, dataset pool)
+EGL_PROBE_ENV = "OCSLAM_EGL_PROBE"
+
+_PROBE_CODE = r"""
+import sys, pybullet as p
+cid = p.connect(p.DIRECT)
+if p.loadPlugin(sys.argv[1], "_eglRendererPlugin", physicsClientId=cid) < 0:
+    print("OCSLAM_PROBE loadPlugin failed", file=sys.stderr); sys.exit(3)
+vis = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.2, 0.2, 0.2], rgbaColor=[1, 0, 0, 1], physicsClientId=cid)
+p.createMultiBody(0, -1, vis, [1, 0, 0], physicsClientId=cid)
+view = p.computeViewMatrix([0, 0, 0], [1, 0, 0], [0, 0, 1])
+proj = p.computeProjectionMatrixFOV(60, 4 / 3, 0.05, 20)
+_, _, rgba, _, seg = p.getCameraImage(32, 24, view, proj, renderer=p.ER_BULLET_HARDWARE_OPENGL, physicsClientId=cid)
+import numpy as np
+seg = np.reshape(np.asarray(seg), (24, 32))
+if seg[12, 16] != 0 or seg[0, 0] != -1:
+    print("OCSLAM_PROBE wrong image", file=sys.stderr); sys.exit(4)
+print("OCSLAM_PROBE ok", file=sys.stderr)
+"""
+
+
+class RendererError(RuntimeError):
+    """The requested renderer cannot be used (``sim.renderer = egl`` where EGL does not load)."""
+
+
+def egl_plugin_path() -> str | None:
+    """The EGL renderer plugin's shared library (``$OCSLAM_EGL_PLUGIN`` or pybullet's ``eglRenderer``)."""
+    env = os.environ.get(EGL_PLUGIN_ENV)
+    if env:
+        return env
+    try:
+        spec = importlib.util.find_spec("eglRenderer")
+    except (ImportError, ValueError):
+        return None
+    return spec.origin if spec is not None else None
+
+
+_probe_cache: dict[str, tuple[bool, str]] = {}
+_probe_lock = threading.Lock()
+
+
+def probe_egl(timeout_s: float = 120.0) -> tuple[bool, str]:
+    """``(ok, detail)``: can pybullet's EGL plugin render here? Tried once in a child process (a missing
+    libEGL or an unusable display makes the plugin exit its process); the verdict is cached for this
+    process and passed to child processes through ``$OCSLAM_EGL_PROBE``. ``detail`` names the OpenGL
+    renderer (``llvmpipe (LLVM 15.0.6, 256 bits)``) or why EGL failed."""
+    path = egl_plugin_path()
+    if path is None:
+        return False, "pybullet has no eglRenderer plugin"
+    with _probe_lock:
+        if path in _probe_cache:
+            return _probe_cache[path]
+        try:
+            cached = json.loads(os.environ.get(EGL_PROBE_ENV, "") or "{}")
+        except ValueError:
+            cached = {}
+        if isinstance(cached, dict) and cached.get("plugin") == path and "ok" in cached:
+            res = (bool(cached["ok"]), str(cached.get("detail", "")))
+        else:
+            res = _run_probe(path, timeout_s)
+            os.environ[EGL_PROBE_ENV] = json.dumps({"plugin": path, "ok": res[0], "detail": res[1]})
+        _probe_cache[path] = res
+        return res
+
+
+def _run_probe(path: str, timeout_s: float) -> tuple[bool, str]:
+    if not os.path.exists(path):
+        return False, f"EGL plugin {path} does not exist"
+    try:
+        r = subprocess.run([sys.executable, "-c", _PROBE_CODE, path], capture_output=True, text=True, timeout=timeout_s,
+                           env={**os.environ, "OMP_NUM_THREADS": "1"})
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return False, f"EGL probe failed: {e}"
+    gl = next((ln.split("=", 1)[1].strip() for ln in r.stdout.splitlines() if ln.startswith("GL_RENDERER=")), "")
+    if r.returncode == 0 and "OCSLAM_PROBE ok" in r.stderr and gl:
+        return True, gl
+    tail = " ".join((r.stderr.strip().splitlines() or [""])[-2:])
+    return False, f"EGL probe exited with {r.returncode}: {tail or 'no output'}"
+
+
+def resolve_renderer(requested: str) -> tuple[str, str]:
+    """``(renderer, note)`` for ``sim.renderer``: ``"egl"`` or ``"tiny"``, and a human-readable note
+    (the OpenGL renderer, or why TinyRenderer is used). ``"egl"`` raises :class:`RendererError` if EGL
+    cannot render here; ``"auto"`` falls back to TinyRenderer with a logged warning."""
+    requested = str(requested or "auto").lower()
+    if requested not in RENDERERS:
+        raise RendererError(f"unknown renderer {requested!r} (choices: {', '.join(RENDERERS)})")
+    if requested == "tiny":
+        return "tiny", "TinyRenderer (requested)"
+    ok, detail = probe_egl()
+    if ok:
+        return "egl", f"EGL ({detail})"
+    if requested == "egl":
+        raise RendererError(f"the EGL renderer does not load: {detail}. {EGL_INSTALL_HINT}")
+    msg = f"EGL renderer unavailable ({detail}); using TinyRenderer. {EGL_INSTALL_HINT}"
+    if not getattr(resolve_renderer, "_warned", False):
+        log.warning("%s", msg)
+        resolve_renderer._warned = True  # type: ignore[attr-defined]
+    return "tiny", f"TinyRenderer (fallback: {detail})"
+
+
+EGL_INSTALL_HINT = "Install Mesa's EGL: sudo apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri (or: sudo make setup)."
+
+_devnull_fd: int | None = None
+_stdout_lock = threading.Lock()
+_libc: Any = None
+
+
+def _c_fflush() -> None:
+    """Flush C stdio buffers (what the plugin printed must reach /dev/null, not the restored stdout)."""
+    global _libc
+    try:
+        if _libc is None:
+            _libc = ctypes.CDLL(None)
+        _libc.fflush(None)
+    except Exception:
+        pass
+
+
+_alias_root: str | None = None
+_aliases: dict[tuple[str, tuple[float, ...]], str] = {}
+
+
+def egl_mesh_alias(path: str, mesh_scale: Sequence[float]) -> str:
+    """A file name for ``path`` unique to ``mesh_scale``: pybullet's EGL renderer caches meshes by file
+    name, so two scales of one file (a table's top and legs) would both be drawn at the first scale.
+    The alias is a per-process symlink to the mesh's *directory* (its .mtl and textures resolve)."""
+    global _alias_root
+    key = (os.path.abspath(path), tuple(round(float(v), 9) for v in mesh_scale))
+    got = _aliases.get(key)
+    if got is not None:
+        return got
+    import atexit
+    import hashlib
+    import shutil
+    import tempfile
+
+    if _alias_root is None:
+        _alias_root = tempfile.mkdtemp(prefix="ocslam-egl-meshes-")
+        atexit.register(shutil.rmtree, _alias_root, True)
+    first = next((k for k in _aliases if k[0] == key[0]), None)
+    if first is None:  # the first scale of a file keeps its own name
+        _aliases[key] = key[0]
+        return key[0]
+    d = os.path.join(_alias_root, hashlib.sha1(repr(key).encode()).hexdigest()[:16])
+    if not os.path.exists(d):
+        os.symlink(os.path.dirname(key[0]), d)
+    _aliases[key] = os.path.join(d, os.path.basename(key[0]))
+    return _aliases[key]
+
+
+@contextlib.contextmanager
+def quiet_c_stdout(stderr: bool = False) -> Iterator[None]:
+    """Silence what C code writes to file descriptor 1 (and 2 if ``stderr``): pybullet's EGL plugin prints
+    its OpenGL strings at load and ``ven = Mesa/X.org`` at every render, which would corrupt ``--json``."""
+    global _devnull_fd
+    fds = (1, 2) if stderr else (1,)
+    with _stdout_lock:
+        for s in (sys.stdout, sys.stderr):
+            try:
+                s.flush()
+            except Exception:
+                pass
+        if _devnull_fd is None:
+            _devnull_fd = os.open(os.devnull, os.O_WRONLY)
+        saved = [os.dup(fd) for fd in fds]
+        try:
+            for fd in fds:
+                os.dup2(_devnull_fd, fd)
+            yield
+        finally:
+            _c_fflush()
+            for fd, s in zip(fds, saved):
+                os.dup2(s, fd)
+                os.close(s)
+
+
 def pose3(T: Pose2, z: float = 0.0) -> NDArray[np.float64]:
     """``(4, 4)`` homogeneous matrix of a planar pose at height ``z``."""
     c, s = math.cos(T.yaw), math.sin(T.yaw)
@@ -88,7 +287,9 @@ def _quat_from_matrix(R: NDArray[np.float64]) -> tuple[float, float, float, floa
 class SimWorld:
     """A world, the robot and its sensors in a private pybullet client (see the module docstring)."""
 
-    def __init__(self, world: World, config: Config, *, seed: int | None = None) -> None:
+    def __init__(self, world: World, config: Config, *, seed: int | None = None, renderer: str | None = None) -> None:
+        """``renderer``: ``auto | egl | tiny`` (default ``config.sim.renderer``); the one in use is
+        :attr:`renderer` (``"egl"`` or ``"tiny"``) with a human-readable :attr:`renderer_note`."""
         import pybullet as p
 
         self._p = p
@@ -97,9 +298,21 @@ class SimWorld:
         self.seed = int(config.sim.seed if seed is None else seed)
         self.dt = float(config.sim.physics_dt_s)
         self.robot_model = RobotModel.load()
+        requested = renderer if renderer is not None else getattr(config.sim, "renderer", "auto")
+        self.renderer, self.renderer_note = resolve_renderer(requested)
         self.client: int = p.connect(p.DIRECT)
         if self.client < 0:
             raise RuntimeError("pybullet: cannot open a DIRECT client")
+        if self.renderer == "egl":  # before any body: the plugin only sees shapes created after it loads
+            with quiet_c_stdout(stderr=True):
+                plugin = p.loadPlugin(egl_plugin_path(), "_eglRendererPlugin", physicsClientId=self.client)
+            if plugin < 0:
+                if str(requested).lower() == "egl":
+                    p.disconnect(self.client)
+                    raise RendererError(f"pybullet could not load the EGL plugin. {EGL_INSTALL_HINT}")
+                log.warning("EGL plugin did not load; using TinyRenderer")
+                self.renderer, self.renderer_note = "tiny", "TinyRenderer (fallback: the EGL plugin did not load)"
+        self._renderer_flag = p.ER_BULLET_HARDWARE_OPENGL if self.renderer == "egl" else p.ER_TINY_RENDERER
         self.object_body_ids: dict[int, list[int]] = {}
         #: body id → (kind, index, role): kind "object" | "obstacle" | "wall" | "floor" | "glass"
         self.body_info: dict[int, tuple[str, int, str]] = {}
@@ -116,6 +329,7 @@ class SimWorld:
     # ------------------------------------------------------------------------------------------
     def _build(self) -> None:
         p, cid, w = self._p, self.client, self.world
+        mf = egl_mesh_alias if self.renderer == "egl" else None
         xmin, ymin, xmax, ymax = w.bounds()
         cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
         hx, hy = (xmax - xmin) / 2 + 1.0, (ymax - ymin) / 2 + 1.0
@@ -161,7 +375,7 @@ class SimWorld:
                 ids.append(p.createMultiBody(0.0, col, vis, [o.x, o.y, o.z + o.height / 2], physicsClientId=cid))
             else:
                 spec = get_model(o.model)
-                built = build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, z=o.z, scale=o.scale, colors=resolve_colors(spec, o.color))
+                built = build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, z=o.z, scale=o.scale, colors=resolve_colors(spec, o.color), mesh_file=mf)
                 ids.extend(b for b, _ in built)
                 for b, role in built:
                     self.body_info[b] = ("obstacle", i, role)
@@ -170,7 +384,7 @@ class SimWorld:
             self.obstacle_body_ids.append(ids)
         for i, o in enumerate(w.objects):
             spec = get_model(o.model)
-            built = build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, scale=o.scale, colors=resolve_colors(spec, o.color))
+            built = build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, scale=o.scale, colors=resolve_colors(spec, o.color), mesh_file=mf)
             self.object_body_ids[i] = [b for b, _ in built]
             for b, role in built:
                 self.body_info[b] = ("object", i, role)
@@ -507,9 +721,10 @@ class SimWorld:
         if light:
             kw.update(light)
         flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
-        _, _, rgba, zbuf, seg = p.getCameraImage(
-            width, height, view, proj, renderer=p.ER_TINY_RENDERER, flags=flags, physicsClientId=cid, **kw
-        )
+        with quiet_c_stdout() if self.renderer == "egl" else contextlib.nullcontext():
+            _, _, rgba, zbuf, seg = p.getCameraImage(
+                width, height, view, proj, renderer=self._renderer_flag, flags=flags, physicsClientId=cid, **kw
+            )
         rgb = np.ascontiguousarray(np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))[:, :, :3])
         frame = CameraFrame(stamp=self.time, image=Image(stamp=self.time, data=rgb), info=info, T_world_camera=T_world_cam)
         if depth:
@@ -586,7 +801,8 @@ class SimWorld:
         """Disconnect the pybullet client (idempotent)."""
         if getattr(self, "client", -1) >= 0:
             try:
-                self._p.disconnect(self.client)
+                with quiet_c_stdout() if getattr(self, "renderer", "tiny") == "egl" else contextlib.nullcontext():
+                    self._p.disconnect(self.client)
             except Exception:
                 pass
             self.client = -1

@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -896,11 +896,14 @@ def build_model_pybullet(
     z: float = 0.0,
     scale: float = 1.0,
     colors: dict[str, RGB] | None = None,
+    mesh_file: Callable[[str, Sequence[float]], str] | None = None,
 ) -> list[tuple[int, str]]:
     """Create the model's static bodies in pybullet ``client``; returns ``[(body id, role)]``.
 
     Every part becomes one static body (mass 0) with its own visual (coloured by role) and
-    collision shape. ``yaw`` in radians.
+    collision shape. ``yaw`` in radians. ``mesh_file(path, mesh_scale)`` (optional) names the file a
+    visual mesh is loaded from (the EGL renderer caches meshes by file name and would draw a second
+    scale of the same file at the first one's: the simulator passes a per-scale alias).
     """
     import pybullet as p
 
@@ -929,7 +932,7 @@ def build_model_pybullet(
             col_kw = dict(shapeType=p.GEOM_SPHERE, radius=d[0])
         elif part.shape == "mesh":
             path = str(mesh_path(part.mesh))
-            vis_kw = dict(shapeType=p.GEOM_MESH, fileName=path, meshScale=d)
+            vis_kw = dict(shapeType=p.GEOM_MESH, fileName=mesh_file(path, d) if mesh_file else path, meshScale=d)
             if part.collision == "box":
                 col_kw = dict(shapeType=p.GEOM_BOX, halfExtents=[d[0] / 2, d[1] / 2, d[2] / 2])
             elif part.collision in ("auto", ""):

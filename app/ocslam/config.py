@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
+from app.ocslam.messages import CLASS_NAMES
+
 
 class ConfigError(ValueError):
     """A configuration value or file is invalid. The message names the offending key."""
@@ -29,8 +31,13 @@ def param(
     help: str = "",
     live: bool = False,
     choices: Sequence[Any] | None = None,
+    items: Any = None,
+    length: int | None = None,
 ) -> Any:
-    """Declare a config field with its metadata (range, step, unit, help, live-tunable, choices)."""
+    """Declare a config field with its metadata (range, step, unit, help, live-tunable, choices).
+
+    List fields: ``items`` is the type of every element (``float``: finite numbers, ``str``) or a
+    sequence of the allowed elements; ``length`` a required number of elements."""
     meta = {
         "min": min,
         "max": max,
@@ -39,6 +46,8 @@ def param(
         "help": help,
         "live": live,
         "choices": tuple(choices) if choices is not None else None,
+        "items": items if items is None or isinstance(items, type) else tuple(items),
+        "length": length,
     }
     if isinstance(default, (list, dict, set)):
         return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
@@ -86,8 +95,10 @@ def coerce_value(section: str, f: dataclasses.Field, value: Any) -> Any:
             if not isinstance(value, list):
                 raise ValueError(value)
     except (TypeError, ValueError):
-        tname = ftype.__name__ if ftype else "value"
+        tname = ftype.__name__ if ftype else ("list" if f.default_factory is not dataclasses.MISSING else "value")
         raise ConfigError(f"{key}: expected a {tname}, got {value!r}") from None
+    if isinstance(value, list):
+        value = _check_items(key, value, meta.get("items"), meta.get("length"))
     if meta.get("choices") is not None and value not in meta["choices"]:
         raise ConfigError(f"{key}: {value!r} is not one of {list(meta['choices'])}")
     if isinstance(value, (int, float)) and not isinstance(value, bool):
@@ -95,6 +106,25 @@ def coerce_value(section: str, f: dataclasses.Field, value: Any) -> Any:
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise ConfigError(f"{key}: {value!r} is outside [{lo}, {hi}]{(' ' + meta['unit']) if meta.get('unit') else ''}")
     return value
+
+
+def _check_items(key: str, value: list, items: Any, length: int | None) -> list:
+    """A list field's elements, checked like scalars (see :func:`param`); :class:`ConfigError` otherwise."""
+    if length is not None and len(value) != length:
+        raise ConfigError(f"{key}: expected a list of {length} elements, got {value!r}")
+    out = []
+    for i, v in enumerate(value):
+        if items is float:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+                raise ConfigError(f"{key}[{i}]: expected a finite number, got {v!r}")
+            v = float(v)
+        elif items is str:
+            if not isinstance(v, str):
+                raise ConfigError(f"{key}[{i}]: expected a string, got {v!r}")
+        elif isinstance(items, tuple) and v not in items:
+            raise ConfigError(f"{key}[{i}]: {v!r} is not one of {list(items)}")
+        out.append(v)
+    return out
 
 
 def validate_section(section: str, obj: Any) -> None:
@@ -191,6 +221,21 @@ class SlamConfig:
     loop_query_max_points: int = param(600, min=10, max=100000, help="loop query cloud size cap")
     loop_min_gap_keyframes: int = param(10, min=0, max=100000, help="extra keyframes between the local map and loop submaps")
     loop_max_candidates: int = param(3, min=1, max=100, help="submaps searched per keyframe")
+    match_info_point_sigma_m: float = param(
+        0.1, min=0.001, max=10.0, unit="m", help="effective σ per scan point for the matcher's information (edges)"
+    )
+    match_info_floor: float = param(
+        1e-4, min=1e-9, max=1.0, help="edge information floor, relative to the ceiling σs (degenerate directions)"
+    )
+    odom_sigma_xy_m: float = param(0.05, min=0.0001, max=10.0, unit="m", help="odometry σ per keyframe step (xy, constant part)")
+    odom_sigma_xy_per_m: float = param(0.5, min=0.0, max=10.0, help="odometry σ growth per metre of the step (xy)")
+    odom_sigma_yaw_rad: float = param(0.02, min=0.0001, max=10.0, unit="rad", help="odometry σ per keyframe step (yaw)")
+    odom_sigma_yaw_per_rad: float = param(0.2, min=0.0, max=10.0, help="odometry yaw σ growth per radian turned")
+    loop_cluster_min: int = param(2, min=1, max=100, help="loop closures accepted only in mutually consistent groups this large")
+    loop_confirm_keyframes: int = param(25, min=1, max=100000, help="a loop candidate not confirmed within this many keyframes is rejected")
+    loop_pair_chi2: float = param(16.0, min=0.1, max=1e6, help="pairwise consistency gate of two loop candidates (χ², 3 dof)")
+    loop_gate_chi2: float = param(200.0, min=0.1, max=1e9, help="loop correction vs the graph's uncertainty over the loop (χ², 3 dof)")
+    loop_residual_chi2: float = param(100.0, min=0.1, max=1e9, help="a loop edge with a larger χ² after optimisation is rejected")
     optimize_every_keyframes: int = param(10, min=1, max=1000, help="optimise at most this often while loops arrive")
     optimize_iterations: int = param(5, min=1, max=100, help="Levenberg–Marquardt iterations per online optimisation")
     map_update_budget: int = param(50, min=1, max=100000, help="keyframes re-inserted into the grid per map update")
@@ -217,13 +262,15 @@ class DetectorConfig:
     verify_hash: bool = param(
         True, help="refuse a model whose sha256 differs from its model card (assets/models/*.yaml)"
     )
+    spin: bool = param(False, help="onnxruntime intra-op threads spin-wait between runs (costs CPU the loop needs)")
+    denormal_as_zero: bool = param(False, help="onnxruntime flushes float denormals to zero")
     oracle_min_pixels: int = param(60, min=1, max=100000, help="oracle: minimum visible pixels for a box")
     oracle_min_visible_fraction: float = param(0.25, min=0.0, max=1.0, help="oracle: minimum visible fraction")
     oracle_confidence_mean: float = param(0.85, min=0.0, max=1.0, help="oracle: mean confidence")
     oracle_confidence_std: float = param(0.08, min=0.0, max=0.5, help="oracle: confidence noise σ")
     oracle_box_jitter_px: float = param(3.0, min=0.0, max=50.0, unit="px", help="oracle: box edge noise σ")
     ignore_classes: list = param(
-        [], help="classes dropped after detection (the original drops duck and chair)"
+        [], help="classes dropped after detection (the original drops duck and chair)", items=CLASS_NAMES
     )
 
 
@@ -294,4 +341,15 @@ class ConsciousnessConfig:
     )
     edge_margin_px: float = param(
         8.0, min=0.0, max=100.0, step=1.0, unit="px", help="improved: a box this close to the image border is cut by it", live=True
+    )
+    point_ownership: bool = param(
+        True,
+        help="improved: each LIDAR island belongs to one box's object per frame (boxes nearest the camera choose first); "
+        "objects of different classes collide only when they share points",
+        live=True,
+    )
+    shared_evidence_fraction: float = param(
+        0.5, min=0.0, max=1.0, step=0.05,
+        help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",
+        live=True,
     )

@@ -13,8 +13,10 @@ local cloud (its scan and its predecessors', voxel-downsampled), which is more d
 
 Acceptance (strict): the discrete score must reach ``loop_min_score``, the continuous refinement must
 keep at least ``loop_min_inliers`` of the query points within 5 cm of the submap's surfaces, and the
-refinement must not wander more than two cells from the discrete optimum. The pose graph then adds the
-edge with a robust (Cauchy) kernel.
+refinement must not wander more than two cells from the discrete optimum. Each closure carries the
+information of its refinement (:mod:`.information`, in the keyframe's frame: loose along a corridor).
+Accepted here means *candidate*: :mod:`.verify` confirms it before the pose graph gets the edge (with a
+robust Cauchy kernel).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from numpy.typing import NDArray
 from app.ocslam.config import SlamConfig
 from app.ocslam.se2 import between, transform_points, wrap_angle
 from app.ocslam.slam.field import MatchField, build_field
+from app.ocslam.slam.information import scan_information
 from app.ocslam.slam.keyframes import Keyframes
 from app.ocslam.slam.matcher import correlative_search, refine
 
@@ -38,6 +41,7 @@ class LoopClosure:
     measurement: NDArray[np.float64]  # (3,) T_anchor_keyframe
     score: float
     inlier_fraction: float
+    info: NDArray[np.float64] | None = None  # (3, 3) information of the match in the keyframe's frame
 
 
 @dataclass
@@ -181,8 +185,10 @@ class LoopCloser:
             if constraint < cfg.loop_min_constraint:
                 continue
             self.accepted += 1
-            self.travel_since_loop = 0.0
-            out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction))
+            info = scan_information(
+                ref.hessian, float(ref.pose[2]), cfg.match_info_point_sigma_m, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor
+            )
+            out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction, info))
         return out
 
     def forget(self) -> None:

@@ -31,11 +31,13 @@ from app.ocslam.config import SlamConfig
 from app.ocslam.messages import LaserScan, OccupancyGrid
 from app.ocslam.se2 import Pose2, between, compose, interpolate, transform_points, wrap_angle
 from app.ocslam.slam.field import MatchField, build_field
-from app.ocslam.slam.graph import PoseGraph, optimize
+from app.ocslam.slam.graph import PoseGraph, as_full_info, edge_chi2, edge_errors, optimize
+from app.ocslam.slam.information import odometry_information, scan_information
 from app.ocslam.slam.grid import LogOddsGrid
 from app.ocslam.slam.keyframes import Growable, Keyframes, KeyframeScan, Trajectory
 from app.ocslam.slam.loop import LoopCloser
 from app.ocslam.slam.matcher import correlative_search, refine
+from app.ocslam.slam.verify import Candidate, LoopVerifier
 
 
 class Slam:
@@ -52,9 +54,13 @@ class Slam:
         self.traj = Trajectory()
         self.edges_ij = Growable((2,), np.int64)
         self.edges_z = Growable((3,))
-        self.edges_info = Growable((3,))
+        self.edges_info = Growable((3, 3))
         self.edges_loop = Growable((), bool)
+        self.edges_active = Growable((), bool)
         self.loops = LoopCloser(self.cfg)
+        self.verifier = LoopVerifier(self.cfg)
+        self._kf_odom = Growable((3,))  # T_odom_base at each keyframe
+        self._match_H = (np.zeros((3, 3)), 0.0)  # (Hessian in the map frame, yaw) of the last match
         self.correction_count = 0
         self.skipped: dict[str, int] = Counter()
         self.stats: dict[str, int] = Counter()
@@ -161,6 +167,7 @@ class Slam:
         can settle in a local minimum when the predicted heading is off by a degree or more).
         """
         cfg = self.cfg
+        self._match_H = (np.zeros((3, 3)), float(pred[2]))
         fld = self._local_field()
         if fld is None:
             return pred
@@ -177,17 +184,22 @@ class Slam:
             direct = refine(fld, pts, pred, **kw)
             if direct.inlier_fraction >= cfg.match_direct_min_inliers:
                 self.stats["match_direct"] += 1
+                self._match_H = (direct.hessian, float(direct.pose[2]))
                 return direct.pose
         res = correlative_search(
             fld, pts, pred, cfg.match_search_xy_m, cfg.match_search_yaw_rad, cfg.match_yaw_step_rad, cfg.match_min_score
         )
         if res is None:
             self.stats["match_failed"] += 1
-            return direct.pose if direct is not None and direct.inlier_fraction > 0 else pred
+            if direct is not None and direct.inlier_fraction > 0:
+                self._match_H = (direct.hessian, float(direct.pose[2]))
+                return direct.pose
+            return pred
         ref = refine(fld, pts, res.pose, **kw)
         self.stats["match_searched"] += 1
         if direct is not None and direct.inlier_fraction > ref.inlier_fraction:
-            return direct.pose
+            ref = direct
+        self._match_H = (ref.hessian, float(ref.pose[2]))
         return ref.pose
 
     def _local_field(self) -> MatchField | None:
@@ -222,26 +234,51 @@ class Slam:
     def _add_edge(self, i: int, j: int, z: NDArray[np.float64], info: NDArray[np.float64], loop: bool) -> None:
         self.edges_ij.append((i, j))
         self.edges_z.append(z)
-        self.edges_info.append(info)
+        info = np.asarray(info, np.float64)
+        self.edges_info.append(info if info.shape == (3, 3) else np.diag(info.reshape(3)))
         self.edges_loop.append(loop)
+        self.edges_active.append(True)
+
+    def _active_edges(self):
+        a = self.edges_active.data
+        return self.edges_ij.data[a], self.edges_z.data[a], self.edges_info.data[a], self.edges_loop.data[a]
+
+    def sequential_information(self, H_map: NDArray[np.float64], yaw: float, odom_delta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(3, 3)`` information of a sequential edge: the matcher's (clamped) plus the odometry's.
+
+        Where the scan constrains a direction (walls across it) the matcher's information dominates; along
+        a corridor's axis it is at the floor and the odometry increment's information takes over.
+        """
+        cfg = self.cfg
+        scan = scan_information(H_map, yaw, cfg.match_info_point_sigma_m, cfg.edge_sigma_xy_m, cfg.edge_sigma_yaw_rad, cfg.match_info_floor)
+        odo = odometry_information(odom_delta, cfg.odom_sigma_xy_per_m, cfg.odom_sigma_yaw_per_rad, cfg.odom_sigma_xy_m, cfg.odom_sigma_yaw_rad)
+        return scan + odo
 
     def _add_keyframe(self, stamp: float, pose: NDArray[np.float64], geo: KeyframeScan) -> None:
         cfg = self.cfg
         k = self.keyframes.add(float(stamp), pose, geo)
         self._inserted.append(np.full(3, np.nan))
+        odom = self.traj.odom.data[-1].copy()
+        self._kf_odom.append(odom)
         # the scan that made the keyframe is now anchored on it
         self.traj.anchor.data[-1] = k
         self.traj.rel.data[-1] = 0.0
         if k > 0:
             prev = self.keyframes.poses.data[k - 1]
-            info = np.array([1 / cfg.edge_sigma_xy_m**2, 1 / cfg.edge_sigma_xy_m**2, 1 / cfg.edge_sigma_yaw_rad**2])
+            H, yaw = self._match_H
+            info = self.sequential_information(H, yaw, between(self._kf_odom.data[k - 1], odom))
             self._add_edge(k - 1, k, between(prev, pose), info, False)
         self._kf_since_opt += 1
         if cfg.loop_closure and k > 0:
-            info = np.array([1 / cfg.loop_sigma_xy_m**2, 1 / cfg.loop_sigma_xy_m**2, 1 / cfg.loop_sigma_yaw_rad**2])
+            poses = self.keyframes.poses.data
             for lc in self.loops.search(self.keyframes, k):
-                self._add_edge(lc.anchor, lc.keyframe, lc.measurement, info, True)
-                self._pending_loops += 1
+                info = lc.info if lc.info is not None else np.diag([1 / cfg.loop_sigma_xy_m**2, 1 / cfg.loop_sigma_xy_m**2, 1 / cfg.loop_sigma_yaw_rad**2])
+                ij, z, inf, _ = self._active_edges()
+                for c in self.verifier.offer(Candidate(lc.anchor, lc.keyframe, lc.measurement, info, lc.score), poses, ij, z, inf):
+                    self._add_edge(c.anchor, c.keyframe, c.z, c.info, True)
+                    self._pending_loops += 1
+                    self.loops.travel_since_loop = 0.0
+            self.verifier.expire(k)
         if self._pending_loops and self._kf_since_opt >= cfg.optimize_every_keyframes:
             self.optimize()
 
@@ -253,15 +290,25 @@ class Slam:
         if len(self.keyframes) < 2 or len(self.edges_ij) == 0:
             return False
         poses = self.keyframes.poses.data
-        res = optimize(
-            poses,
-            self.edges_ij.data,
-            self.edges_z.data,
-            self.edges_info.data,
-            self.edges_loop.data,
-            robust_scale=self.cfg.loop_robust_scale,
-            iterations=iterations,
-        )
+        cfg = self.cfg
+        x = poses
+        for _round in range(3):
+            act = np.flatnonzero(self.edges_active.data)
+            ij, z, info, loop = (self.edges_ij.data[act], self.edges_z.data[act], self.edges_info.data[act], self.edges_loop.data[act])
+            res = optimize(x, ij, z, info, loop, robust_scale=cfg.loop_robust_scale, iterations=iterations)
+            if not np.all(np.isfinite(res.poses)):
+                break
+            x = res.poses
+            # verification after the optimisation: loop edges the rest of the graph contradicts go
+            chi2 = edge_chi2(edge_errors(res.poses, ij, z), info)
+            bad = act[loop & (chi2 > cfg.loop_residual_chi2)]
+            if len(bad) == 0:
+                break
+            for m in bad:
+                self.edges_active.data[m] = False
+                a, b = self.edges_ij.data[m]
+                self.verifier.rejected.append((int(a), int(b), "residual"))
+                self.verifier.rejected_by["residual"] += 1
         d = res.poses - poses
         if not np.all(np.isfinite(res.poses)):
             self.stats["optimize_failed"] += 1
@@ -325,12 +372,32 @@ class Slam:
         return k if k >= 0 else None
 
     def pose_graph(self) -> PoseGraph:
+        """The graph for display: active edges (``is_loop`` marks accepted loop closures) and the
+        ``rejected`` loop closures ``(R, 2)`` (verification or post-optimisation residual)."""
+        act = self.edges_active.data
+        rej = np.array([(a, b) for a, b, _ in self.verifier.rejected], np.int64).reshape(-1, 2)
         return PoseGraph(
             nodes=self.keyframes.poses.data.copy(),
             stamps=self.keyframes.stamps.data.copy(),
-            edges=self.edges_ij.data.copy(),
-            is_loop=self.edges_loop.data.copy(),
+            edges=self.edges_ij.data[act].copy(),
+            is_loop=self.edges_loop.data[act].copy(),
+            rejected=rej,
         )
+
+    def metrics(self) -> dict:
+        """Counters for the metrics panel and reports: keyframes, loop closures accepted / rejected (by reason)."""
+        act = self.edges_active.data
+        loop = self.edges_loop.data
+        rej = dict(self.verifier.rejected_by)
+        return {
+            "slam_keyframes": int(len(self.keyframes)),
+            "slam_loops_accepted": int((loop & act).sum()),
+            "slam_loops_rejected": int(sum(rej.values())),
+            "slam_loops_pending": int(len(self.verifier.pending)),
+            "slam_loops_rejected_by": rej,
+            "slam_loop_candidates": int(self.loops.accepted),
+            "slam_corrections": int(self.correction_count),
+        }
 
     def _insert(self, k: int, pose: NDArray[np.float64], sign: float) -> None:
         sc = self.keyframes.scans[k]
@@ -374,7 +441,7 @@ class Slam:
         npts = np.array([len(s.points) for s in scans], np.int64)
         nends = np.array([len(s.ends) for s in scans], np.int64)
         return {
-            "version": 1,
+            "version": 2,
             "T_base_scan": np.array(list(self.T_base_scan)),
             "kf_poses": self.keyframes.poses.data.copy(),
             "kf_stamps": self.keyframes.stamps.data.copy(),
@@ -388,6 +455,10 @@ class Slam:
             "edges_z": self.edges_z.data.copy(),
             "edges_info": self.edges_info.data.copy(),
             "edges_loop": self.edges_loop.data.copy(),
+            "edges_active": self.edges_active.data.copy(),
+            "kf_odom": self._kf_odom.data.copy(),
+            "loops_rejected": np.array([(a, b) for a, b, _ in self.verifier.rejected], np.int64).reshape(-1, 2),
+            "loops_rejected_reason": [r for _, _, r in self.verifier.rejected],
             "traj_stamps": self.traj.stamps.data.copy(),
             "traj_anchor": self.traj.anchor.data.copy(),
             "traj_rel": self.traj.rel.data.copy(),
@@ -412,14 +483,28 @@ class Slam:
             scan = KeyframeScan(pts[po[k] : po[k + 1]].copy(), ends[eo[k] : eo[k + 1]].copy(), hit[eo[k] : eo[k + 1]].copy(), sensor[k].copy())
             s.keyframes.add(float(st), pose, scan)
             s._inserted.append(np.full(3, np.nan))
-        for ij, z, inf, lp in zip(
-            np.asarray(d["edges_ij"]).reshape(-1, 2), np.asarray(d["edges_z"]).reshape(-1, 3), np.asarray(d["edges_info"]).reshape(-1, 3), np.asarray(d["edges_loop"]).reshape(-1)
-        ):
-            s._add_edge(int(ij[0]), int(ij[1]), z, inf, bool(lp))
+        eij = np.asarray(d["edges_ij"]).reshape(-1, 2)
+        info = as_full_info(np.asarray(d["edges_info"]))  # (M, 3) diagonal in version-1 states
+        active = np.asarray(d.get("edges_active", np.ones(len(eij), bool)), bool).reshape(-1)
+        for m, (ij, z, lp) in enumerate(zip(eij, np.asarray(d["edges_z"]).reshape(-1, 3), np.asarray(d["edges_loop"]).reshape(-1))):
+            s._add_edge(int(ij[0]), int(ij[1]), z, info[m], bool(lp))
+            s.edges_active.data[-1] = bool(active[m])
+        reasons = list(d.get("loops_rejected_reason", []))
+        for n, (a, b) in enumerate(np.asarray(d.get("loops_rejected", np.zeros((0, 2))), np.int64).reshape(-1, 2)):
+            r = str(reasons[n]) if n < len(reasons) else "rejected"
+            s.verifier.rejected.append((int(a), int(b), r))
+            s.verifier.rejected_by[r] += 1
         s.traj.stamps = Growable.from_array(np.asarray(d["traj_stamps"], np.float64).reshape(-1))
         s.traj.anchor = Growable.from_array(np.asarray(d["traj_anchor"], np.int64).reshape(-1))
         s.traj.rel = Growable.from_array(np.asarray(d["traj_rel"], np.float64).reshape(-1, 3))
         s.traj.odom = Growable.from_array(np.asarray(d["traj_odom"], np.float64).reshape(-1, 3))
+        if "kf_odom" in d:
+            s._kf_odom = Growable.from_array(np.asarray(d["kf_odom"], np.float64).reshape(-1, 3))
+        else:  # version 1: the odometry of the scan that made each keyframe
+            anch = s.traj.anchor.data
+            for k in range(len(s.keyframes)):
+                hits = np.flatnonzero(anch == k)
+                s._kf_odom.append(s.traj.odom.data[hits[0]] if len(hits) else np.zeros(3))
         beams = int(d.get("beams", -1))
         s._beams = None if beams < 0 else beams
         s.correction_count = int(d.get("correction_count", 0))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from typing import Sequence
 
@@ -26,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "dataset": ("app.commands.dataset", "render an auto-labelled YOLO dataset from the simulator"),
     "train-detector": ("app.commands.train_detector", "train the YOLO detector (needs the [train] extra)"),
     "export": ("app.commands.export", "export maps, objects and sessions"),
+    "replay": ("app.commands.replay", "replay a ROS 1 / rosbag2 bag through the core (--headless, --reuse-detections)"),
 }
 
 BENCHES: dict[str, tuple[str, str]] = {
@@ -48,8 +50,16 @@ def _load(module: str):
         raise
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one ``ocslam: error: …`` line (exit 2), like every other CLI failure."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        print(f"ocslam: error: {self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ocslam", description="Object-Conscious SLAM in a simulated apartment.")
+    parser = _Parser(prog="ocslam", description="Object-Conscious SLAM in a simulated apartment.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_text) in COMMANDS.items():
         mod = _load(module)
@@ -110,7 +120,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             known = known + (DetectorError,)
         except ImportError:
             pass
-        if isinstance(e, known):
-            print(f"ocslam: error: {e}", file=sys.stderr)
+        try:
+            from app.session import SessionError
+
+            known = known + (SessionError,)
+        except ImportError:
+            pass
+        if isinstance(e, known + (OSError,)):  # OSError: --out not writable, a file where a folder must be, …
+            msg = str(e) if not isinstance(e, OSError) or not e.filename else f"{e.filename}: {e.strerror or e}"
+            print(f"ocslam: error: {msg}", file=sys.stderr)
             return 2
-        raise
+        if os.environ.get("OCSLAM_TRACEBACK"):
+            raise
+        # a bug, not a bad input: still one line (OCSLAM_TRACEBACK=1 shows where)
+        print(f"ocslam: error: internal error: {type(e).__name__}: {e} (OCSLAM_TRACEBACK=1 for the traceback)",
+              file=sys.stderr)
+        return 2

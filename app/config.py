@@ -95,12 +95,17 @@ class SimConfig:
         0.05, min=0.0, max=2.0, unit="s", help="wheel rates follow the command with this first-order lag"
     )
     robot_height_m: float = param(0.192, min=0.05, max=2.0, unit="m", help="height of the robot's collision cylinder")
-    light_direction: list = param([0.3, -0.4, 1.0], help="render light direction [x, y, z] (world frame)")
+    light_direction: list = param([0.3, -0.4, 1.0], help="render light direction [x, y, z] (world frame)", items=float,
+                                  length=3)
     light_ambient: float = param(0.6, min=0.0, max=1.0, help="render ambient light coefficient")
     light_diffuse: float = param(0.5, min=0.0, max=1.0, help="render diffuse light coefficient")
     renderer: str = param(
         "auto", choices=("auto", "egl", "tiny"),
         help="camera renderer: auto = pybullet's EGL plugin (Mesa llvmpipe) where it loads, else TinyRenderer",
+    )
+    parallel_stages: bool = param(
+        True, help="run the detector, SLAM and the consciousness on threads overlapping physics, LIDAR and rendering"
+                   " (results tied to sensor stamps: the same run as without)",
     )
 
 
@@ -171,13 +176,33 @@ class ServerConfig:
 
     host: str = param("127.0.0.1", help="bind address ('0.0.0.0' exposes the robot to the network)")
     port: int = param(8080, min=0, max=65535, help="port (0: any free port)")
-    allow_origins: list = param([], help="extra allowed WebSocket Origins (besides the server's own)")
+    allow_origins: list = param([], help="extra allowed WebSocket Origins (besides the server's own)", items=str)
     require_token: bool = param(True, help="on a non-loopback host, require the random access token printed at start"
                                 " (`ocslam run --no-token` turns it off)")
     runs_dir: str = param("runs", help="the only directory the web UI saves or loads sessions, maps and configs in"
                           " (relative: to the project root)")
     worlds_dirs: list = param(["worlds", "assets/worlds"], help="directories whose *.yaml worlds the web UI offers"
                               " (relative: to the project root)")
+
+
+@dataclass
+class ReplayConfig:
+    """``ocslam replay`` and ``ocslam run --record`` (ROS 2 bags, docs/ros2.md)."""
+
+    T_base_scan: list = param(
+        [],
+        help="LIDAR pose in base_footprint [x, y, z, roll, pitch, yaw] (m, rad) when the bag has no /tf_static for it"
+             " ([]: the robot model's)",
+    )
+    scan_topic: str = param("/scan", help="sensor_msgs/LaserScan topic")
+    odom_topic: str = param("/odom", help="nav_msgs/Odometry topic (else /tf odom → base)")
+    image_topic: str = param("/camera/image_raw/compressed", help="sensor_msgs/CompressedImage topic")
+    image_raw_topic: str = param("/camera/image_raw", help="sensor_msgs/Image topic (used when no compressed one)")
+    camera_info_topic: str = param("/camera/camera_info", help="sensor_msgs/CameraInfo topic")
+    yolo_boxes_topic: str = param("/yolo_boxes", help="recorded boxes (std_msgs/Float32MultiArray) for --reuse-detections")
+    snapshot_period_s: float = param(10.0, min=0.5, max=3600.0, unit="s", help="core snapshots for seeking, every")
+    record_image_format: str = param("jpeg", choices=("jpeg", "png"), help="recorded camera frames: jpeg or lossless png")
+    record_jpeg_quality: int = param(95, min=10, max=100, help="JPEG quality of recorded camera frames")
 
 
 SECTIONS: dict[str, type] = {
@@ -191,6 +216,7 @@ SECTIONS: dict[str, type] = {
     "consciousness": ConsciousnessConfig,
     "ui": UiConfig,
     "server": ServerConfig,
+    "replay": ReplayConfig,
 }
 
 
@@ -208,6 +234,7 @@ class Config:
     consciousness: ConsciousnessConfig = field(default_factory=ConsciousnessConfig)
     ui: UiConfig = field(default_factory=UiConfig)
     server: ServerConfig = field(default_factory=ServerConfig)
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
 
     # -- field access ------------------------------------------------------------------------------
     def field_info(self, path: str) -> tuple[str, dataclasses.Field]:
@@ -281,6 +308,8 @@ class Config:
                 text = p.read_text(encoding="utf-8")
             except OSError as e:
                 raise ConfigError(f"cannot read config file {p}: {e.strerror or e}") from None
+            except UnicodeDecodeError:
+                raise ConfigError(f"{p}: not a YAML config (binary data, not UTF-8 text)") from None
             try:
                 data = yaml.safe_load(text)
             except yaml.YAMLError as e:

@@ -1,0 +1,255 @@
+"""Record a live run as a rosbag2 MCAP bag (ROS 2 CDR messages with their definitions).
+
+:class:`BagRecorder` observes a :class:`app.pipeline.Pipeline` from outside: after each loop step,
+:meth:`BagRecorder.observe` reads the pipeline's public state (the latest odometry pose, the scan counter
+and ``last_scan``, the camera frame and detections of the last fusion, the SLAM's map and graph) and
+writes what is new. It changes nothing in the pipeline, except that building ``/map`` brings the SLAM's
+lazy grid up to date, which the replay repeats at the same instants.
+
+Topics, types and frames: :mod:`app.ros2.topics`. Example::
+
+    rec = BagRecorder("runs/tour/bag")
+    rec.start(pipe)
+    while ...:
+        pipe.step(); rec.observe(pipe)
+    rec.close(pipe)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+
+from app.ros2 import convert, topics
+from app.ros2.errors import RecordError
+from app.ros2.typestore import ros2_typestore
+
+if TYPE_CHECKING:
+    from app.pipeline import Pipeline
+
+log = logging.getLogger(__name__)
+
+#: the bag's custom_data key naming its writer (the replay keeps the SLAM's grid updates in step with it)
+WRITER_KEY = "ocslam.writer"
+WRITER_VALUE = "ocslam-recorder-1"
+
+
+def _qos(latched: bool) -> list[Qos]:
+    zero = QosTime(0, 0)
+    return [Qos(QosHistory.KEEP_LAST, 1 if latched else 10, QosReliability.RELIABLE,
+                QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE, zero, zero,
+                QosLiveliness.AUTOMATIC, zero, False)]
+
+
+def static_transforms(robot_model: Any) -> list[tuple[str, str, np.ndarray]]:
+    """``(parent, child, T_parent_child)`` of the robot's static frames, from its URDF link poses."""
+    out = []
+    for parent, child in topics.STATIC_FRAMES:
+        T_bp = np.eye(4) if parent == "base_footprint" else np.asarray(robot_model.T_base(parent))
+        T_bc = np.asarray(robot_model.T_base(child))
+        out.append((parent, child, np.linalg.inv(T_bp) @ T_bc))
+    return out
+
+
+class BagRecorder:
+    """Writes one run to ``path`` (a new bag folder: ``metadata.yaml`` + ``<name>_0.mcap``)."""
+
+    def __init__(self, path: str | Path, *, image_format: str = "jpeg", jpeg_quality: int = 95,
+                 map_hz: float = 1.0, cmd_vel_hz: float = 10.0) -> None:
+        self.path = Path(path)
+        if self.path.exists():
+            raise RecordError(f"{self.path} exists already: a bag is never overwritten (choose another --record path)")
+        self.image_format = image_format
+        self.jpeg_quality = int(jpeg_quality)
+        self.map_period = 1.0 / map_hz
+        self.cmd_period = 1.0 / cmd_vel_hz
+        self.store = ros2_typestore()
+        self.writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.counts: dict[str, int] = {}
+        self.wall_s = 0.0  # time spent recording (for the RTF cost)
+        self._conns: dict[str, Any] = {}
+        self._open = False
+        self._last_odom = -1.0
+        self._scans: int | None = None
+        self._dets: Any = None
+        self._next_map = 0.0
+        self._next_cmd = 0.0
+
+    # -- writing -----------------------------------------------------------------------------------
+    def _write(self, topic: str, msg: Any, t_log: float) -> None:
+        conn = self._conns.get(topic)
+        if conn is None:
+            msgtype = topics.RECORDED_TOPICS[topic]
+            conn = self.writer.add_connection(topic, msgtype, typestore=self.store,
+                                              offered_qos_profiles=_qos(topic in topics.LATCHED_TOPICS))
+            self._conns[topic] = conn
+        self.writer.write(conn, convert.to_ns(t_log), self.store.serialize_cdr(msg, msg.__msgtype__))
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+    def start(self, pipe: "Pipeline") -> "BagRecorder":
+        """Open the bag and write what is static: ``/tf_static`` and the ground truth."""
+        t0 = time.perf_counter()
+        try:
+            self.writer.set_custom_data(WRITER_KEY, WRITER_VALUE)
+            self.writer.open()
+        except (WriterError, OSError) as e:
+            raise RecordError(f"cannot create bag {self.path}: {e}") from None
+        self._open = True
+        t = pipe.time
+        tfs = [convert.transform_stamped(t, p, c, T) for p, c, T in static_transforms(pipe.robot_model)]
+        self._write(topics.TF_STATIC, convert.tf_message(tfs), t)
+        try:
+            objs, obst = convert.ground_truth_to_ros(pipe.truth_objects_map(), pipe.truth_obstacles_map(), t)
+            self._write(topics.GT_OBJECTS, objs, t)
+            self._write(topics.GT_FOOTPRINTS, obst, t)
+        except Exception as e:  # a world without ground truth still records
+            log.warning("ground truth not recorded: %s", e)
+        self._next_map = t + self.map_period
+        self._scans = pipe.counters.scans
+        self._dets = pipe.fusion.detections
+        self.wall_s += time.perf_counter() - t0
+        return self
+
+    def observe(self, pipe: "Pipeline") -> None:
+        """Write whatever the last step produced (call after each ``pipe.step()``)."""
+        if not self._open:
+            return
+        t0 = time.perf_counter()
+        t = pipe.time
+        latest = pipe.odom_poses.latest()
+        if latest is not None and latest[0] > self._last_odom:
+            stamp, T = latest
+            self._last_odom = stamp
+            o = pipe.odometry
+            self._write(topics.ODOM, convert.odom_to_ros(stamp, T, o.linear_x, o.angular_z), t)
+            self._write(topics.TF, convert.tf_message([convert.transform_stamped(stamp, "odom", "base_footprint", T)]), t)
+        if self._scans is None:
+            self._scans = pipe.counters.scans  # scans before the recording started are not written
+        if pipe.counters.scans != self._scans and pipe.last_scan is not None:
+            self._scans = pipe.counters.scans
+            scan = pipe.last_scan
+            self._write(topics.SCAN, convert.scan_to_ros(scan), t)
+            self._write(topics.TF, convert.tf_message(
+                [convert.transform_stamped(scan.stamp, "map", "odom", pipe.T_map_odom)]), t)
+            if pipe.truth_log and abs(pipe.truth_log[-1][0] - scan.stamp) < 1e-9:
+                self._write(topics.GT_POSE, convert.pose_stamped(scan.stamp, "map", pipe.truth_log[-1][1]), t)
+        dets = pipe.fusion.detections
+        if dets is not None and dets is not self._dets:
+            self._dets = dets
+            img = pipe.fusion.image
+            if img is not None:
+                info = pipe.camera_model.info
+                if (info.width, info.height) != (img.width, img.height):
+                    info = info.scaled(img.width, img.height)
+                self._write(topics.IMAGE_COMPRESSED,
+                            convert.image_to_compressed(_stamped(img, dets.stamp), self.jpeg_quality, self.image_format), t)
+                self._write(topics.CAMERA_INFO, convert.camera_info_to_ros(info, dets.stamp), t)
+            self._write(topics.YOLO_BOXES, convert.yolo_boxes_to_ros(dets), t)
+        if t + 1e-9 >= self._next_cmd and pipe.drive_mode != "idle":
+            self._next_cmd = t + self.cmd_period
+            self._write(topics.CMD_VEL, convert.twist_to_ros(pipe.cmd), t)
+        if t + 1e-9 >= self._next_map:
+            self._next_map += self.map_period * max(1, int((t - self._next_map) / self.map_period) + 1)
+            self._write_results(pipe, t)
+        self.wall_s += time.perf_counter() - t0
+
+    def _write_results(self, pipe: "Pipeline", t: float) -> None:
+        """``/map``, ``/objects``, ``/objects/markers`` and ``/slam/pose_graph`` at ``t``."""
+        if pipe.cfg.slam.enabled:
+            grid = pipe.slam.occupancy_grid()
+            if grid.width and grid.height:
+                self._write(topics.MAP, convert.grid_to_ros(grid, t), t)
+            self._write(topics.POSE_GRAPH, convert.pose_graph_markers(pipe.slam.pose_graph(), t), t)
+        if pipe.detector is not None:
+            objs = pipe.objects_in_map()
+            thr = pipe.cfg.consciousness.presence_threshold
+            self._write(topics.OBJECTS, convert.objects_to_ros(objs, t), t)
+            self._write(topics.OBJECT_MARKERS, convert.object_markers([o for o in objs if o.presence >= thr], t), t)
+
+    def close(self, pipe: "Pipeline | None" = None) -> Path:
+        """Write the final map, objects and graph (if ``pipe``) and finish the bag (``metadata.yaml``)."""
+        if not self._open:
+            return self.path
+        t0 = time.perf_counter()
+        try:
+            if pipe is not None:
+                self._write_results(pipe, pipe.time)
+        finally:
+            self.writer.close()
+            self._open = False
+            self.wall_s += time.perf_counter() - t0
+        return self.path
+
+
+def _stamped(img: Any, stamp: float) -> Any:
+    from dataclasses import replace
+
+    return img if img.stamp == stamp else replace(img, stamp=stamp)
+
+
+def attach(pipe: "Pipeline", path: str | Path, **kwargs: Any) -> BagRecorder:
+    """Start a recorder on ``pipe`` and make every ``pipe.step()`` feed it (the live web app's hook).
+
+    The instance's ``step`` is wrapped; :func:`detach` (or ``pipe.close``) restores it."""
+    rc = getattr(pipe.cfg, "replay", None)
+    if rc is not None:
+        kwargs.setdefault("image_format", rc.record_image_format)
+        kwargs.setdefault("jpeg_quality", rc.record_jpeg_quality)
+    rec = BagRecorder(path, **kwargs).start(pipe)
+    step = pipe.step
+
+    def recorded_step() -> None:
+        step()
+        try:
+            rec.observe(pipe)
+        except Exception:  # never lose the loop for the recording
+            log.exception("bag recording failed; recording stopped")
+            rec._open = False
+
+    pipe.step = recorded_step  # type: ignore[method-assign]
+    rec._restore = lambda: setattr(pipe, "step", step)  # type: ignore[attr-defined]
+    return rec
+
+
+def detach(pipe: "Pipeline", rec: BagRecorder) -> Path:
+    """Stop recording: restore ``pipe.step`` and finish the bag."""
+    restore = getattr(rec, "_restore", None)
+    if restore is not None:
+        restore()
+    return rec.close(pipe)
+
+
+def staging_path(out: str | Path) -> Path:
+    """Where a run directory's bag is written while the run lasts: ``.<name>.bag-recording/bag`` beside
+    ``out`` (the run directory is written as a unit at the end, :func:`app.session.write_run_dir`); moved
+    in as ``out/bag`` by :func:`move_into_run_dir`."""
+    import shutil
+
+    out = Path(out).absolute()
+    stage = out.parent / f".{out.name}.bag-recording"
+    if stage.exists():
+        shutil.rmtree(stage)  # left by a run that was killed before its bag was moved in
+    stage.mkdir(parents=True)
+    return stage / "bag"
+
+
+def move_into_run_dir(rec: BagRecorder, out: str | Path) -> Path:
+    """Move a finished bag into the run directory as ``out/bag`` (replacing an older one)."""
+    import shutil
+
+    dst = Path(out) / "bag"
+    if dst.exists():
+        shutil.rmtree(dst)
+    src = rec.path
+    src.replace(dst)
+    if src.parent.name.endswith(".bag-recording"):
+        shutil.rmtree(src.parent, ignore_errors=True)
+    rec.path = dst
+    return dst

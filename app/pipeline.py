@@ -11,6 +11,14 @@ Data flow (the paper's Figure 1)::
 The web server and the headless runner both drive a :class:`Pipeline`. GUI callbacks never touch it
 directly: they :meth:`Pipeline.submit` a function that the loop runs between steps.
 
+Stages in parallel (``sim.parallel_stages``): the loop thread runs physics, odometry, LIDAR, control and
+camera requests; the detector runs on its own thread (onnxruntime releases the GIL) and SLAM and the
+consciousness on an estimator thread, in the order their sensor data was taken (FIFO), so each sees the
+state a sequential run would. Nothing the loop thread decides depends on when a job finishes: a scan's
+``map → odom`` is *published* (used for control and shown) one LIDAR period after its stamp, with or
+without threads, and whoever reads the estimators (``slam``, ``consciousness``, the grid, the metrics)
+from outside waits for the jobs in flight first. A seed gives the same trajectory and objects either way.
+
 Frames: the simulator's ``world`` frame is only known to the simulator and the evaluation. ``odom`` starts
 at the robot's start pose and ``map`` starts equal to ``odom`` (as slam_toolbox does), so ground truth is
 compared in ``map`` through ``T_map_world = T_world_start⁻¹`` (the world file's declared start pose, the
@@ -22,8 +30,10 @@ from __future__ import annotations
 import logging
 import math
 import queue
+import threading
 import time
 from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -57,12 +67,14 @@ class StageTimer:
         self.total_s = {s: 0.0 for s in stages}
         self.calls = {s: 0 for s in stages}
         self.recent_ms = {s: 0.0 for s in stages}
+        self._lock = threading.Lock()  # stages are timed on the loop, detector and estimator threads
 
     def add(self, stage: str, seconds: float) -> None:
-        self.total_s[stage] = self.total_s.get(stage, 0.0) + seconds
-        self.calls[stage] = self.calls.get(stage, 0) + 1
-        prev = self.recent_ms.get(stage, 0.0)
-        self.recent_ms[stage] = 0.9 * prev + 0.1 * seconds * 1e3 if prev else seconds * 1e3
+        with self._lock:
+            self.total_s[stage] = self.total_s.get(stage, 0.0) + seconds
+            self.calls[stage] = self.calls.get(stage, 0) + 1
+            prev = self.recent_ms.get(stage, 0.0)
+            self.recent_ms[stage] = 0.9 * prev + 0.1 * seconds * 1e3 if prev else seconds * 1e3
 
     def time(self, stage: str):
         timer = self
@@ -106,12 +118,87 @@ class Counters:
     fused_frames: int = 0
     skipped_frames: dict[str, int] = field(default_factory=dict)
     errors: dict[str, int] = field(default_factory=dict)
+    _lock: Any = field(default_factory=threading.Lock, repr=False, compare=False)
 
     def skip(self, reason: str) -> None:
-        self.skipped_frames[reason] = self.skipped_frames.get(reason, 0) + 1
+        with self._lock:
+            self.skipped_frames[reason] = self.skipped_frames.get(reason, 0) + 1
 
     def error(self, reason: str) -> None:
-        self.errors[reason] = self.errors.get(reason, 0) + 1
+        with self._lock:
+            self.errors[reason] = self.errors.get(reason, 0) + 1
+
+
+class StageJobs:
+    """Where the detector and estimator jobs run: on two worker threads (``parallel``) or inline.
+
+    ``detect(fn, ...)`` runs on the detector thread; ``estimate(fn, ...)`` on the estimator thread, in
+    submission order. Both return a :class:`Future`; inline, it is already done. Jobs catch their own
+    errors (a failed job never stops the loop). :meth:`join` waits for every estimator job submitted.
+    """
+
+    def __init__(self, parallel: bool) -> None:
+        self.parallel = bool(parallel)
+        self._det = ThreadPoolExecutor(1, thread_name_prefix="ocslam-detector") if self.parallel else None
+        self._est = ThreadPoolExecutor(1, thread_name_prefix="ocslam-estimators") if self.parallel else None
+        self._pending: deque[Future] = deque()
+        self._threads: set[int] = set()
+
+    @staticmethod
+    def _inline(fn: Callable[..., Any], *args: Any) -> Future:
+        f: Future = Future()
+        try:
+            f.set_result(fn(*args))
+        except BaseException as e:  # noqa: BLE001 - handed to whoever reads the future
+            f.set_exception(e)
+        return f
+
+    def _wrap(self, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def run(*args: Any) -> Any:
+            self._threads.add(threading.get_ident())
+            return fn(*args)
+
+        return run
+
+    def detect(self, fn: Callable[..., Any], *args: Any) -> Future:
+        if self._det is None:
+            return self._inline(fn, *args)
+        return self._det.submit(self._wrap(fn), *args)
+
+    def estimate(self, fn: Callable[..., Any], *args: Any) -> Future:
+        if self._est is None:
+            return self._inline(fn, *args)
+        f = self._est.submit(self._wrap(fn), *args)
+        self._pending.append(f)
+        return f
+
+    def in_worker(self) -> bool:
+        return threading.get_ident() in self._threads
+
+    def join(self) -> None:
+        """Wait for every estimator job submitted so far (a no-op on a worker thread or inline)."""
+        if self._est is None or self.in_worker():
+            return
+        while self._pending:
+            f = self._pending[0]
+            try:
+                f.result()
+            except Exception:  # jobs log their own errors
+                pass
+            self._pending.popleft()
+
+    def busy(self) -> int:
+        """Estimator jobs not finished yet."""
+        while self._pending and self._pending[0].done():
+            self._pending.popleft()
+        return sum(not f.done() for f in self._pending)
+
+    def close(self) -> None:
+        self.join()
+        for ex in (self._det, self._est):
+            if ex is not None:
+                ex.shutdown(wait=True)
+        self._det = self._est = None
 
 
 def make_detector(cfg: Config):
@@ -163,12 +250,9 @@ class Pipeline:
         self.cfg = cfg
         self.world = world if world is not None else load_world(resolve_path(cfg.sim.world))
         self.robot_model = RobotModel.load()
-        self.sim = SimWorld(self.world, cfg, seed=cfg.sim.seed)
-        self.T_world_start: Pose2 = self.sim.true_pose()
-        self.T_map_world: Pose2 = self.T_world_start.inverse()
-        self.T_base_scan: Pose2 = self.robot_model.T_base_scan_2d()
-        self.odometry = DiffDriveOdometry(cfg.robot)
-        self.slam = Slam(cfg.slam, T_base_scan=self.T_base_scan)
+        self.jobs = StageJobs(bool(getattr(cfg.sim, "parallel_stages", True)))
+        self._slam_results: deque[tuple[float, Future]] = deque()  # (scan stamp, T_map_odom after it)
+        self._T_map_odom_pub = Pose2()
         self.detector_error: str | None = None
         if detector == "auto":
             try:
@@ -178,17 +262,29 @@ class Pipeline:
                 log.error("detector disabled: %s", e)
                 detector = None
         self.detector = detector
+        # the loop's own client renders only without a render process: it skips the EGL context then
+        render_process = self.detector is not None and cfg.camera.async_render
+        self.sim = SimWorld(self.world, cfg, seed=cfg.sim.seed, renderer="tiny" if render_process else None)
+        self.T_world_start: Pose2 = self.sim.true_pose()
+        self.T_map_world: Pose2 = self.T_world_start.inverse()
+        self.T_base_scan: Pose2 = self.robot_model.T_base_scan_2d()
+        self.odometry = DiffDriveOdometry(cfg.robot)
+        self.slam = Slam(cfg.slam, T_base_scan=self.T_base_scan)
         if self.detector is not None and hasattr(self.detector, "world"):
             self.detector.world = self.world  # the oracle's visible-fraction test renders silhouettes
         self.camera_model = build_camera_model(cfg, self.robot_model)
         self.camera_worker = None
-        if self.detector is not None and cfg.camera.async_render:
+        self.renderer, self.renderer_note = self.sim.renderer, self.sim.renderer_note
+        if render_process:
             from app.render_worker import CameraWorker
 
             try:
-                self.camera_worker = CameraWorker(self.world, cfg, seed=cfg.sim.seed)
-            except Exception as e:  # fall back to rendering in the loop
+                self.camera_worker = CameraWorker(self.world, cfg, seed=cfg.sim.seed, warmup=camera_render_size(cfg))
+                self.renderer, self.renderer_note = self.camera_worker.renderer, self.camera_worker.renderer_note
+            except Exception as e:  # fall back to rendering in the loop (TinyRenderer)
                 log.warning("camera render process unavailable (%s); rendering in the loop", e)
+                self.renderer_note = f"{self.sim.renderer_note}; in the loop (render process unavailable: {e})"
+        log.info("camera renderer: %s", self.renderer_note)
         self.consciousness = Consciousness(cfg.consciousness, self.camera_model)
 
         self.timer = StageTimer()
@@ -241,6 +337,47 @@ class Pipeline:
     def camera_render_size(self) -> tuple[int, int]:
         return camera_render_size(self.cfg)
 
+    # -- the estimators: read from outside only once the jobs in flight are done -------------------
+    @property
+    def slam(self) -> Any:
+        """The SLAM node (waits for the scans in flight to be processed)."""
+        self.jobs.join()
+        return self._slam
+
+    @slam.setter
+    def slam(self, slam: Any) -> None:
+        self.jobs.join()
+        self._slam = slam
+        self._slam_results.clear()
+        self._T_map_odom_pub = slam.T_map_odom
+
+    @property
+    def consciousness(self) -> Any:
+        """The consciousness (waits for the frames in flight to be fused)."""
+        self.jobs.join()
+        return self._consciousness
+
+    @consciousness.setter
+    def consciousness(self, c: Any) -> None:
+        self.jobs.join()
+        self._consciousness = c
+
+    def wait_stages(self) -> None:
+        """Wait until every detector, SLAM and consciousness job submitted so far is done."""
+        self.jobs.join()
+
+    def _publish_slam(self, flush: bool = False) -> None:
+        """``map → odom`` of each scan becomes the loop's one LIDAR period after the scan's stamp (at the
+        same step with or without threads; ``flush``: every scan processed so far, for a clock change)."""
+        delay = 1.0 / self.cfg.lidar.rate_hz
+        t = self.sim.time
+        while self._slam_results and (flush or t + 1e-9 >= self._slam_results[0][0] + delay):
+            _, fut = self._slam_results.popleft()
+            try:
+                self._T_map_odom_pub = fut.result()
+            except Exception:  # the job logged it; keep the last pose
+                pass
+
     def _on_reset(self) -> None:
         self.restart_odometry(Pose2())
 
@@ -249,6 +386,8 @@ class Pipeline:
         if self.camera_worker is not None:
             while self.camera_worker.pending:
                 self.camera_worker.collect()
+        self.jobs.join()
+        self._publish_slam(flush=True)
         self.sim.set_time(t)
         now = self.sim.time
         self._next_odom = self._next_scan = now
@@ -296,7 +435,8 @@ class Pipeline:
 
     @property
     def T_map_odom(self) -> Pose2:
-        return self.slam.T_map_odom if self.cfg.slam.enabled else Pose2()
+        """The published ``map → odom`` (SLAM's estimate one LIDAR period after its scan, see the module)."""
+        return self._T_map_odom_pub if self.cfg.slam.enabled else Pose2()
 
     @property
     def T_map_base(self) -> Pose2:
@@ -439,6 +579,7 @@ class Pipeline:
         self.drain_commands()
         if self.paused:
             return
+        self._publish_slam()
         self.cmd = self._control()
         with self.timer.time("physics"):
             self.sim.set_cmd_vel(self.cmd)
@@ -482,23 +623,34 @@ class Pipeline:
         stamp = scan.stamp
         T_odom_base = self.odom_poses.at(stamp)
         if self.cfg.slam.enabled:
-            with self.timer.time("slam"):
-                try:
-                    self.slam.process(scan, T_odom_base)
-                except Exception:
-                    log.exception("SLAM failed on a scan; skipped")
-                    self.counters.error("slam")
-            if self.slam.correction_count != self._slam_corrections:
-                self._slam_corrections = self.slam.correction_count
-                if self.cfg.consciousness.mode == "improved":
-                    with self.timer.time("consciousness"):
-                        self.consciousness.apply_correction(self.slam.keyframe_pose)
+            self._slam_results.append((stamp, self.jobs.estimate(self._slam_job, scan, T_odom_base)))
         # ground truth bookkeeping (evaluation only)
         true_map = self.true_pose_map()
         self.truth_log.append((stamp, true_map, T_odom_base))
         if self._last_true is not None:
             self._true_distance += true_map.distance(self._last_true)
         self._last_true = true_map
+
+    def _slam_job(self, scan: LaserScan, T_odom_base: Pose2) -> Pose2:
+        """Estimator thread: SLAM on one scan (and the consciousness' correction after a loop closure);
+        returns ``T_map_odom`` after it."""
+        slam = self._slam
+        with self.timer.time("slam"):
+            try:
+                slam.process(scan, T_odom_base)
+            except Exception:
+                log.exception("SLAM failed on a scan; skipped")
+                self.counters.error("slam")
+        if slam.correction_count != self._slam_corrections:
+            self._slam_corrections = slam.correction_count
+            if self.cfg.consciousness.mode == "improved":
+                with self.timer.time("consciousness"):
+                    try:
+                        self._consciousness.apply_correction(slam.keyframe_pose)
+                    except Exception:
+                        log.exception("consciousness correction failed")
+                        self.counters.error("consciousness")
+        return slam.T_map_odom
 
     def _camera_trigger(self) -> None:
         """A camera frame is due: render it now, or ask the render process for it."""
@@ -512,66 +664,93 @@ class Pipeline:
         self._camera_process(frame)
 
     def _camera_process(self, frame) -> None:
-        """Detector and fusion on one camera frame (stamped when it was taken)."""
-        oracle = self.cfg.detector.kind == "oracle"
+        """Detector and fusion on one camera frame (stamped when it was taken). The loop thread takes
+        what the fusion needs from its buffers now (the scan, the odometry poses); the detector and the
+        fusion run as jobs (see :class:`StageJobs`)."""
         self.counters.images += 1
+        truth = self.sim.ground_truth_objects() if self.cfg.detector.kind == "oracle" else None
+        dets = self.jobs.detect(self._detect_job, frame, truth)
+        self.jobs.estimate(self._fuse_job, frame, dets, self._fusion_inputs(frame.stamp))
+
+    def _detect_job(self, frame, truth) -> Detections | None:
         with self.timer.time("detector"):
             try:
-                if oracle:
-                    dets = self.detector.detect(frame, self.sim.ground_truth_objects())
-                else:
-                    dets = self.detector.detect(frame.image)
+                if truth is not None:
+                    return self.detector.detect(frame, truth)
+                return self.detector.detect(frame.image)
             except Exception:
                 log.exception("detector failed on a frame; skipped")
                 self.counters.error("detector")
-                return
-        self.counters.detections += len(dets)
-        self.fusion.image = frame.image
-        self.fusion.detections = dets
-        with self.timer.time("consciousness"):
-            self._fuse(dets)
+                return None
 
-    def _fuse(self, dets: Detections) -> None:
+    def _fusion_inputs(self, stamp: float) -> tuple:
+        """Loop thread: the sensor data a frame at ``stamp`` is fused with (taken when it is processed)."""
+        c = self.cfg.consciousness
+        if c.mode == "seed":  # the original: the latest scan and the latest raw odometry pose
+            return ("seed", self.scans.latest(), self.odometry.T_odom_base)
+        scan = self.scans.nearest(stamp, c.sync_tolerance_s)
+        if scan is None:
+            return ("improved", None, None, None)
+        return ("improved", scan, self.odom_poses.at(stamp), self.odom_poses.at(scan.stamp))
+
+    def _fuse_job(self, frame, dets_future: Future, inputs: tuple) -> None:
+        """Estimator thread: wait for the frame's detections, then fuse them."""
+        dets = dets_future.result()
+        if dets is None:
+            return
+        self.counters.detections += len(dets)
+        snap = FusionSnapshot(
+            stamp=self.fusion.stamp, image=frame.image, detections=dets, report=self.fusion.report,
+            T_frame_base=self.fusion.T_frame_base, synced_scan_dt=self.fusion.synced_scan_dt,
+        )
+        with self.timer.time("consciousness"):
+            try:
+                self._fuse(dets, inputs, snap)
+            except Exception:
+                log.exception("consciousness failed on a frame; skipped")
+                self.counters.error("consciousness")
+        self.fusion = snap
+
+    def _fuse(self, dets: Detections, inputs: tuple, snap: FusionSnapshot) -> None:
         c = self.cfg.consciousness
         stamp = dets.stamp
-        if c.mode == "seed":
+        cons = self._consciousness
+        if inputs[0] == "seed":
             # the original: the latest scan and the latest raw odometry pose, in the odom frame;
             # frames count only when the pose changed since the previous message
-            scan = self.scans.latest()
+            _, scan, T = inputs
             if scan is None:
                 self.counters.skip("no_scan")
                 return
-            T = self.odometry.T_odom_base
             moved = self._last_fusion_pose is None or T != self._last_fusion_pose
             self._last_fusion_pose = T
-            report = self.consciousness.update(dets, scan, T, stamp=stamp, robot_moved=moved)
-            self.fusion.synced_scan_dt = abs(stamp - scan.stamp)
+            report = cons.update(dets, scan, T, stamp=stamp, robot_moved=moved)
+            snap.synced_scan_dt = abs(stamp - scan.stamp)
         else:
-            scan = self.scans.nearest(stamp, c.sync_tolerance_s)
+            _, scan, T_odom_img, T_odom_scan = inputs
             if scan is None:
                 self.counters.skip("no_synced_scan")
                 return
-            T_odom_img = self.odom_poses.at(stamp)
-            T_odom_scan = self.odom_poses.at(scan.stamp)
             if scan.stamp != stamp:
                 scan = reproject_scan(scan, self.T_base_scan, T_odom_img.between(T_odom_scan), stamp)
-            T = self.T_map_odom @ T_odom_img
+            slam = self._slam
+            T = (slam.T_map_odom if self.cfg.slam.enabled else Pose2()) @ T_odom_img
             kf = None
             if self.cfg.slam.enabled:
-                k = self.slam.keyframe_at(stamp)
+                k = slam.keyframe_at(stamp)
                 if k is not None:
-                    kf = (k, self.slam.keyframe_pose(k))
-            grid = self.slam.occupancy_grid() if (self.cfg.slam.enabled and c.corner_check) else None
+                    kf = (k, slam.keyframe_pose(k))
+            grid = slam.occupancy_grid() if (self.cfg.slam.enabled and c.corner_check) else None
             moved = self._last_fusion_pose is None or T.distance(self._last_fusion_pose) > 1e-4 or abs(
                 T.yaw - self._last_fusion_pose.yaw
             ) > 1e-4
             self._last_fusion_pose = T
-            report = self.consciousness.update(dets, scan, T, stamp=stamp, grid=grid, keyframe=kf, robot_moved=moved)
-            self.fusion.synced_scan_dt = 0.0
+            report = cons.update(dets, scan, T, stamp=stamp, grid=grid, keyframe=kf, robot_moved=moved)
+            snap.synced_scan_dt = 0.0
         self.counters.fused_frames += 1
-        self.fusion.stamp = stamp
-        self.fusion.report = report
-        self.fusion.T_frame_base = T
+        snap.stamp = stamp
+        snap.report = report
+        snap.T_frame_base = T
 
     # ---------------------------------------------------------------------------------------------
     # running
@@ -591,6 +770,7 @@ class Pipeline:
         if self.camera_worker is not None:
             while self.camera_worker.pending:  # frames of the old run
                 self.camera_worker.collect()
+        self.jobs.join()
         self.sim.reset()
         self.slam = Slam(self.cfg.slam, T_base_scan=self.T_base_scan)
         self.consciousness = Consciousness(self.cfg.consciousness, self.camera_model)
@@ -739,6 +919,7 @@ class Pipeline:
             "consciousness_mode": self.cfg.consciousness.mode,
             "collisions": int(getattr(self.sim, "collisions", 0)),
         }
+        out.update(self.metrics())
         out.update(self.odometry_errors())
         out.update(self.slam_metrics())
         if self.detector is not None:
@@ -764,7 +945,20 @@ class Pipeline:
             out["detector_error"] = self.detector_error
         return out
 
+    def metrics(self) -> dict[str, Any]:
+        """How the loop runs (for the run summary and the Metrics panel): the camera renderer, the
+        rendered camera size, whether the stages run in parallel, and each stage's recent ms per call."""
+        w, h = self.camera_render_size()
+        return {
+            "renderer": self.renderer,
+            "renderer_note": self.renderer_note,
+            "camera_size": [w, h],
+            "parallel_stages": self.jobs.parallel,
+            "stages_recent_ms": {k: round(v, 3) for k, v in self.timer.recent_ms.items()},
+        }
+
     def close(self) -> None:
+        self.jobs.close()
         if self.camera_worker is not None:
             self.camera_worker.close()
             self.camera_worker = None

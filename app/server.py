@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import socket
 import threading
 import time
 from pathlib import Path
@@ -21,7 +23,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from app.config import Config, ConfigError, resolve_path
+from app.config import PROJECT_ROOT, Config, ConfigError
+
+from app.ui.security import PathRefused, confine_path, is_loopback, new_token, safe_message
 
 log = logging.getLogger(__name__)
 
@@ -33,14 +37,31 @@ class OcslamApp:
         from app.pipeline import Pipeline
         from app.ui.panels import Panels
         from app.ui.scene import SceneLayers
-        from app.ui.security import create_server
+        from app.ui.security import GuiGuard, create_server
         from app.ui.teleop import Teleop
 
         self.cfg = cfg
-        self.pipeline = pipeline if pipeline is not None else Pipeline(cfg)
-        self.server, self.origin_policy = create_server(
-            cfg.server.host, cfg.server.port, allow_origins=list(cfg.server.allow_origins), label="OCSLAM"
+        #: the only directory GUI paths may name for sessions, maps and configs (resolved)
+        self.runs_root = project_path(cfg.server.runs_dir)
+        #: directories whose worlds the World dropdown offers
+        self.worlds_roots = tuple(project_path(d) for d in cfg.server.worlds_dirs)
+        #: access token for a non-loopback host (None: loopback, or --no-token)
+        self.token: str | None = (
+            new_token() if cfg.server.require_token and not is_loopback(cfg.server.host) else None
         )
+        # bind first: an unusable --host/--port fails fast, before the (slow) pipeline is built
+        self.server, self.origin_policy = create_server(
+            cfg.server.host, cfg.server.port, allow_origins=list(cfg.server.allow_origins), label="OCSLAM",
+            token=self.token,
+        )
+        try:
+            self.pipeline = pipeline if pipeline is not None else Pipeline(cfg)
+        except BaseException:
+            self.server.stop()
+            raise
+        self.gui_guard = GuiGuard(self.server, on_refused=self._on_refused)
+        self._world_loading = threading.Lock()  # held while a world loads (off the loop thread)
+        self._pending_pipeline: Any = None  # a loaded world's pipeline waiting for the loop to swap it in
         self.teleop = Teleop(cfg.ui.teleop_linear_mps, cfg.ui.teleop_angular_rps, cfg.ui.teleop_deadman_s)
         self.pipeline.manual_cmd = self.teleop.command
         self._lock = threading.RLock()  # guards pipeline replacement (load world)
@@ -64,9 +85,10 @@ class OcslamApp:
 
     @property
     def url(self) -> str:
+        """The address to open (with ``/?token=…`` when a token is required)."""
         host = self.cfg.server.host
-        shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-        return f"http://{shown}:{self.port}"
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::", "") else (f"[{host}]" if ":" in host else host)
+        return f"http://{shown}:{self.port}" + (f"/?token={self.token}" if self.token else "")
 
     def start(self) -> "OcslamApp":
         self._thread.start()
@@ -80,6 +102,11 @@ class OcslamApp:
             self.server.stop()
         finally:
             self.pipeline.close()
+        if self._world_loading.acquire(timeout=30):  # a world that finished loading after the loop stopped
+            self._world_loading.release()
+        pending, self._pending_pipeline = self._pending_pipeline, None
+        if pending is not None:
+            pending.close()
 
     # ------------------------------------------------------------------------------------------
     # the loop thread
@@ -156,20 +183,42 @@ class OcslamApp:
     # commands (called from viser's thread pool)
     # ------------------------------------------------------------------------------------------
     def notify(self, client: Any, title: str, body: str, color: str = "blue") -> None:
+        """A one-line notification (see :func:`app.ui.security.safe_message`) to ``client`` (None: all)."""
         from app.ui.panels import _notify
 
-        _notify(client, self.server, title, body, color)
+        _notify(client, self.server, title, safe_message(body), color)
 
-    def submit(self, fn: Callable[[Any], Any], *, client: Any = None) -> None:
-        """Run ``fn(pipeline)`` in the loop thread; report failures to the client."""
+    def _on_refused(self, client_id: int, message: str) -> None:
+        client = self.server.get_clients().get(client_id)
+        if client is not None:
+            self.notify(client, "Value refused", message, "red")
+
+    def submit(self, fn: Callable[[Any], Any], *, client: Any = None, files: Callable[[], tuple[Path, ...]] = tuple,
+               what: str = "Command failed") -> None:
+        """Run ``fn(pipeline)`` in the loop thread; report failures to the client (never quoting ``files()``)."""
 
         def run(p: Any) -> None:
             try:
                 fn(p)
             except Exception as e:
-                self.notify(client, "Command failed", str(e), "red")
+                log.warning("%s: %s", what, e)
+                self.notify(client, what, safe_message(e, files=files()), "red")
 
         self.pipeline.submit(run)
+
+    # ------------------------------------------------------------------------------------------
+    # paths the GUI names
+    # ------------------------------------------------------------------------------------------
+    def gui_path(self, text: Any, what: str, *, suffix: str | None = None, must_exist: bool = False) -> Path:
+        """``text`` from a GUI field as a real path inside :attr:`runs_root` (:class:`PathRefused` if not)."""
+        path = confine_path(text, self.runs_root, what=what, must_exist=must_exist)
+        if suffix is not None and path.suffix.lower() not in (suffix, ".yml" if suffix == ".yaml" else suffix):
+            raise PathRefused(f"{what}: the file name must end in {suffix}")
+        return path
+
+    def _refuse(self, client: Any, title: str, e: Exception) -> None:
+        log.warning("%s: %s", title, e)
+        self.notify(client, title, str(e), "red")
 
     def toggle_pause(self) -> None:
         self.paused = not self.paused
@@ -189,10 +238,16 @@ class OcslamApp:
 
     def save_config(self, path: str, *, client: Any = None) -> None:
         try:
-            out = self.cfg.save(resolve_out(path))
-            self.notify(client, "Config saved", f"{out} — run it with `ocslam run --config {out}`", "green")
+            target = self.gui_path(path, "Save config", suffix=".yaml")
+        except PathRefused as e:
+            return self._refuse(client, "Config not saved", e)
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            out = self.cfg.save(target)
+            self.notify(client, "Config saved", f"{self._shown(out)}: run it with `ocslam run --config {out}`", "green")
         except Exception as e:
-            self.notify(client, "Save failed", str(e), "red")
+            log.warning("config not saved: %s", e)
+            self.notify(client, "Config not saved", safe_message(e), "red")
 
     def reset_config(self, *, client: Any = None) -> None:
         def apply(p: Any) -> None:
@@ -208,62 +263,129 @@ class OcslamApp:
     def reset_world(self) -> None:
         self.pipeline.submit(lambda p: p.reset())
 
-    def load_world(self, path: str, *, client: Any = None) -> None:
-        """Replace the pipeline with one on another world (runs in the loop thread)."""
+    def load_world(self, choice: str, *, client: Any = None, wait: bool = False) -> None:
+        """Replace the pipeline with one on the World dropdown's ``choice``.
 
-        def apply(p: Any) -> None:
-            from app.pipeline import Pipeline
-            from app.worlds import load_world
+        Only worlds the dropdown offered can be named (:attr:`Panels.world_paths`). Reading,
+        validating and building the new pipeline run in a helper thread, so the loop and every
+        other client go on meanwhile (an over-limit world is refused by ``app.worlds`` validation
+        before anything heavy); only the swap runs in the loop thread. One load at a time.
+        ``wait``: block until done (tests).
+        """
+        path = self.panels.world_paths.get(choice) if isinstance(choice, str) else None
+        if path is None:
+            return self._refuse(client, "World not loaded", PathRefused("World: not one of the offered worlds"))
+        if not self._world_loading.acquire(blocking=False):
+            self.notify(client, "World not loaded", "another world is still loading", "orange")
+            return
+        self.notify(client, "Loading world", self._shown(path), "blue")
+        t = threading.Thread(target=self._load_world_worker, args=(choice, path, client), name="ocslam-load-world",
+                             daemon=True)
+        t.start()
+        if wait:
+            t.join()
 
+    def _load_world_worker(self, choice: str, path: Path, client: Any) -> None:
+        from app.pipeline import Pipeline
+        from app.worlds import load_world
+
+        try:
             try:
-                world = load_world(resolve_path(path))
+                world = load_world(path)
+                new = Pipeline(self.cfg, world=world)
             except Exception as e:
-                self.notify(client, "World not loaded", str(e), "red")
+                log.warning("world %s not loaded: %s", path, e)
+                self.notify(client, "World not loaded", f"{self._shown(path)}: {safe_message(e, files=(path,))}",
+                            "red")
                 return
-            self.cfg.sim.world = path
-            old = self.pipeline
-            new = Pipeline(self.cfg, world=world)
             new.manual_cmd = self.teleop.command
-            self.pipeline = new
-            self.layers.pipeline = new
-            self.layers.rebuild_world()
-            old.close()
-            routes = tuple(world.routes) or ("(none)",)
-            self.panels.route_choice.options = routes
-            self.panels.route_choice.value = routes[0]
-            self.notify(client, "World loaded", f"{world.name}: {len(world.objects)} objects", "green")
+            if self._stop.is_set():
+                new.close()
+                return
+            self._pending_pipeline = new
+            done = threading.Event()
 
-        self.pipeline.submit(apply)
+            def swap(p: Any) -> None:
+                try:
+                    if self._pending_pipeline is not new:
+                        return
+                    self._pending_pipeline = None
+                    self.cfg.sim.world = choice
+                    old = self.pipeline
+                    self.pipeline = new
+                    self.layers.pipeline = new
+                    self.layers.rebuild_world()
+                    old.close()
+                    routes = tuple(world.routes) or ("(none)",)
+                    self.panels.route_choice.options = routes
+                    self.panels.route_choice.value = routes[0]
+                    self.notify(client, "World loaded", f"{world.name}: {len(world.objects)} objects", "green")
+                finally:
+                    done.set()
+
+            self.pipeline.submit(swap)
+            while not done.wait(0.1) and not self._stop.is_set():
+                pass
+        finally:
+            self._world_loading.release()
 
     def export_map(self, path: str, *, client: Any = None) -> None:
+        try:
+            target = self.gui_path(path, "Export map", suffix=".yaml")
+        except PathRefused as e:
+            return self._refuse(client, "Map not exported", e)
+
         def apply(p: Any) -> None:
             from app.ocslam.mapio import save_map
 
-            out = save_map(p.slam.occupancy_grid(), resolve_out(path))
-            self.notify(client, "Map exported", f"{out} (map_server YAML + PGM)", "green")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            out = save_map(p.slam.occupancy_grid(), target)
+            self.notify(client, "Map exported", f"{self._shown(out)} (map_server YAML + PGM)", "green")
 
-        self.submit(apply, client=client)
+        self.submit(apply, client=client, what="Map not exported")
 
     def save_session(self, path: str, *, client: Any = None) -> None:
+        try:
+            target = self.gui_path(path, "Save session")
+        except PathRefused as e:
+            return self._refuse(client, "Session not saved", e)
+
         def apply(p: Any) -> None:
             from app.session import save_session
 
-            out = save_session(p, resolve_out(path), server=self.server)
-            self.panels.session_status.content = f"saved to `{out}` at sim {p.time:.1f} s"
-            self.notify(client, "Session saved", str(out), "green")
+            out = save_session(p, target, server=self.server)
+            self.panels.session_status.content = f"saved to `{self._shown(out)}` at sim {p.time:.1f} s"
+            self.notify(client, "Session saved", self._shown(out), "green")
 
-        self.submit(apply, client=client)
+        self.submit(apply, client=client, what="Session not saved")
 
     def load_session(self, path: str, *, client: Any = None) -> None:
+        try:
+            target = self.gui_path(path, "Load session", must_exist=True)
+        except PathRefused as e:
+            return self._refuse(client, "Session not loaded", e)
+
+        def files() -> tuple[Path, ...]:
+            return tuple(f for f in sorted(target.glob("*"))[:50] if f.is_file()) if target.is_dir() else (target,)
+
         def apply(p: Any) -> None:
             from app.session import load_session
 
-            load_session(p, resolve_path(path))
+            load_session(p, target)
             self.layers._grid_stamp = -1.0
-            self.panels.session_status.content = f"loaded `{path}`"
-            self.notify(client, "Session loaded", f"map, objects and pose graph restored from {path}", "green")
+            self.panels.session_status.content = f"loaded `{self._shown(target)}`"
+            self.notify(client, "Session loaded", f"map, objects and pose graph restored from {self._shown(target)}",
+                        "green")
 
-        self.submit(apply, client=client)
+        self.submit(apply, client=client, files=files, what="Session not loaded")
+
+    def _shown(self, path: Path | str) -> str:
+        """``path`` as the GUI shows it: relative to the runs root's parent (``runs/session``)."""
+        p = Path(path)
+        for root in (self.runs_root, *self.worlds_roots):
+            if p.is_relative_to(root):
+                return str(Path(root.name) / p.relative_to(root))
+        return p.name
 
     # ------------------------------------------------------------------------------------------
     # views
@@ -310,9 +432,12 @@ class OcslamApp:
 
         @self.server.scene.on_click()
         def _(event: Any) -> None:
-            o = np.asarray(event.ray_origin, dtype=float)
-            d = np.asarray(event.ray_direction, dtype=float)
-            if abs(d[2]) < 1e-6:
+            try:
+                o = np.asarray(event.ray_origin, dtype=float).reshape(3)
+                d = np.asarray(event.ray_direction, dtype=float).reshape(3)
+            except (TypeError, ValueError):
+                return
+            if not (np.isfinite(o).all() and np.isfinite(d).all()) or abs(d[2]) < 1e-6:
                 return
             s = -o[2] / d[2]
             if s <= 0:
@@ -328,20 +453,25 @@ class OcslamApp:
                 event.client, "No path", f"no path to ({x:.2f}, {y:.2f}) on the SLAM grid", "orange"), client=event.client)
 
 
-def resolve_out(path: str | Path) -> Path:
-    p = Path(path).expanduser()
-    return p if p.is_absolute() else Path.cwd() / p
+def project_path(p: str | Path) -> Path:
+    """A config directory as a real path (relative: to the project root)."""
+    path = Path(p).expanduser()
+    return Path(os.path.realpath(path if path.is_absolute() else PROJECT_ROOT / path))
 
 
 def serve(cfg: Config) -> int:
     """``ocslam run``: start the web app and block until Ctrl-C."""
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     app = OcslamApp(cfg).start()
-    exposed = cfg.server.host not in ("127.0.0.1", "localhost", "::1")
     print(f"OCSLAM is running: open {app.url} in your browser (Ctrl-C stops)", flush=True)
-    if exposed:
-        print(f"WARNING: listening on {cfg.server.host}: anyone who can reach this machine can drive the robot.",
-              flush=True)
+    if not is_loopback(cfg.server.host):
+        if app.token:
+            print(f"Listening on {cfg.server.host}: from another machine open "
+                  f"http://{socket.gethostname()}:{app.port}/?token={app.token} (the token is required; "
+                  "it changes at every start)", flush=True)
+        else:
+            print(f"WARNING: listening on {cfg.server.host} with --no-token: anyone who can reach this machine can "
+                  "drive the robot and save files under the runs directory.", flush=True)
     try:
         while True:
             time.sleep(0.5)

@@ -53,6 +53,32 @@ def _notify(client: Any, server: viser.ViserServer, title: str, body: str, color
             pass
 
 
+MAX_OFFERED_WORLDS = 300
+
+
+def offered_worlds(current: str, roots: tuple[Path, ...]) -> dict[str, Path]:
+    """The World dropdown: option label → real path. The running world (chosen by whoever started the
+    server) first, then every ``*.yaml`` under ``roots`` (sub-folders too) whose real path stays inside
+    its root (a symlink pointing out is not offered). Labels are relative to the project root where
+    possible (``assets/worlds/apartment.yaml``)."""
+    from app.config import resolve_path
+
+    out: dict[str, Path] = {current: resolve_path(current).resolve()}
+    for root in roots:
+        if not root.is_dir():
+            continue
+        for f in sorted(root.rglob("*.yaml"))[:MAX_OFFERED_WORLDS]:
+            real = f.resolve()
+            if not real.is_file() or not real.is_relative_to(root):
+                continue
+            try:
+                label = str(f.relative_to(PROJECT_ROOT))
+            except ValueError:
+                label = str(Path(root.name) / f.relative_to(root))
+            out.setdefault(label, real)
+    return out
+
+
 def detections_overlay(rgb: np.ndarray, detections, width: int) -> np.ndarray:
     """The camera image with the YOLO boxes (class colour, label, confidence), resized to ``width``."""
     try:
@@ -118,10 +144,11 @@ class Panels:
             self._config_control("sim.speed", label="sim speed (× real time)")
             b = gui.add_button("Reset world", icon=viser.Icon.REFRESH, hint="restart the world; the map is lost")
             b.on_click(lambda ev: self.app.reset_world())
-            worlds = sorted(str(p.relative_to(PROJECT_ROOT)) for p in (ASSETS / "worlds").glob("*.yaml"))
+            #: dropdown option → the world file it loads (the only worlds "Load world" can name)
+            self.world_paths: dict[str, Path] = offered_worlds(self.app.cfg.sim.world, self.app.worlds_roots)
             current = self.app.cfg.sim.world
-            self.world_choice = gui.add_dropdown("World", tuple(dict.fromkeys([current, *worlds])), initial_value=current)
-            b = gui.add_button("Load world")
+            self.world_choice = gui.add_dropdown("World", tuple(self.world_paths), initial_value=current)
+            b = gui.add_button("Load world", hint="worlds from " + ", ".join(f"{r.name}/" for r in self.app.worlds_roots))
             b.on_click(lambda ev: self.app.load_world(self.world_choice.value, client=ev.client))
         with gui.add_folder("Autonomy"):
             routes = tuple(self.app.pipeline.world.routes) or ("(none)",)

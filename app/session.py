@@ -11,6 +11,18 @@ A run directory holds::
     scene.viser          a viser recording of the run (robot along its path over the final map and objects),
     scene.html           the same, as a self-contained HTML page playable offline
     state.npz            SLAM keyframes/graph + tracker + sim state, so "Load session" can continue mapping
+
+**Written as a unit** (:func:`write_run_dir`): every file goes into a temporary sibling directory
+``.NAME.tmp-*``, which is renamed to ``NAME`` when complete; an existing ``NAME`` is kept as
+``NAME.prev`` until that rename has succeeded, then removed, so a run directory is always either the
+old one or the new one, never a mix, and files the new run does not produce are not left beside it.
+An existing directory is only replaced if it is a run directory (empty, or nothing but files and a
+``bag`` folder, among them ``summary.json`` or ``state.npz``); anything else is refused with
+:class:`SessionError`.
+
+**Validated on load** (:func:`read_session`): ``config.yaml`` and ``state.npz`` must exist and parse;
+the version, the world name, the array shapes, and the finiteness of every pose, stamp and size are
+checked before anything of the running pipeline changes.
 """
 
 from __future__ import annotations
@@ -20,8 +32,12 @@ import io
 import json
 import logging
 import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -34,7 +50,27 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-SESSION_VERSION = 1
+SESSION_VERSION = 2
+#: versions :func:`read_session` accepts (1: before the world name was stored)
+READABLE_VERSIONS = (1, 2)
+
+#: the files a run directory holds (see the module docstring)
+RUN_FILES = frozenset({
+    "config.yaml", "summary.json", "map.yaml", "map.pgm", "objects.json", "trajectory_slam.tum",
+    "trajectory_odom.tum", "scene.viser", "scene.html", "state.npz",
+})
+#: sub-folders a run directory may hold (a rosbag2 recording, docs/ros2.md)
+RUN_DIRS = frozenset({"bag"})
+#: files only runs write: a directory holding one of them is a run directory
+RUN_MARKERS = ("summary.json", "state.npz")
+
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+
+class SessionError(ValueError):
+    """A run directory cannot be written where asked, or a saved session is missing, corrupt or
+    inconsistent. The message names the directory and the problem."""
 
 
 def _quat(yaw: float) -> dict[str, float]:
@@ -134,19 +170,185 @@ def _json_default(o: Any) -> Any:
     return str(o)
 
 
-def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] | None = None, server: Any = None) -> Path:
-    """Write the run directory ``out`` (every file atomically). Returns ``out``."""
+# ----------------------------------------------------------------------------------------------
+# Run directories written as a unit
+# ----------------------------------------------------------------------------------------------
+
+
+def _nearest_existing(p: Path) -> Path:
+    q = p
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    return q
+
+
+def is_run_dir(path: Path) -> bool:
+    """True if ``path`` may be replaced by a new run directory: empty, or only regular files (and a ``bag``
+    folder) that are all run files or include ``summary.json``/``state.npz``."""
+    try:
+        entries = list(os.scandir(path))
+    except OSError:
+        return False
+    if not entries:
+        return True
+    if any(not e.is_file(follow_symlinks=False) and not (e.name in RUN_DIRS and e.is_dir(follow_symlinks=False))
+           for e in entries):
+        return False
+    names = {e.name for e in entries if e.name not in RUN_DIRS}
+    return names <= RUN_FILES or any(m in names for m in RUN_MARKERS)
+
+
+def check_run_dir(out: str | os.PathLike[str], *, what: str = "--out") -> Path:
+    """Check that a run directory can be written at ``out`` without writing anything there.
+
+    Raises :class:`SessionError` if ``out`` is a file, lies under a file, cannot be written (its nearest
+    existing parent is not a writable directory), or is an existing directory that is not a run
+    directory (:func:`is_run_dir`). Returns ``out`` as an absolute path."""
+    out = Path(os.path.abspath(Path(out).expanduser()))
+    if out.name in ("", ".", "..") or out == out.parent:
+        raise SessionError(f"{what} {out}: not a usable run directory name")
+    if out.exists() or out.is_symlink():
+        if not out.is_dir():
+            raise SessionError(f"{what} {out} is a file, not a directory")
+        if not is_run_dir(out):
+            raise SessionError(
+                f"{what} {out} exists and is not a run directory (it holds sub-folders or files a run does not write); "
+                "choose another directory"
+            )
+    base = _nearest_existing(out.parent)
+    if not base.is_dir():
+        raise SessionError(f"{what} {out}: {base} is a file, not a directory")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise SessionError(f"{what} {out}: {base} is not writable")
+    prev = out.with_name(out.name + ".prev")
+    if prev.exists() and not (prev.is_dir() and is_run_dir(prev)):
+        raise SessionError(f"{what} {out}: {prev} exists and is not a run directory; move it away first")
+    return out
+
+
+def check_out_file(out: str | os.PathLike[str], *, what: str = "--out") -> Path:
+    """Check that the file ``out`` can be written (atomically, beside itself) without writing anything:
+    :class:`SessionError` if it is a directory, lies under a file, or its nearest existing parent is not
+    writable. Returns ``out`` as an absolute path."""
+    out = Path(os.path.abspath(Path(out).expanduser()))
+    if out.is_dir():
+        raise SessionError(f"{what} {out} is a directory, not a file")
+    base = _nearest_existing(out.parent)
+    if not base.is_dir():
+        raise SessionError(f"{what} {out}: {base} is a file, not a directory")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise SessionError(f"{what} {out}: {base} is not writable")
+    return out
+
+
+def _clean_stale_tmp(out: Path) -> None:
+    """Remove ``.NAME.tmp-PID-*`` siblings left by runs that were killed (their process is gone)."""
+    try:
+        siblings = list(out.parent.glob(f".{out.name}.tmp-*"))
+    except OSError:
+        return
+    for d in siblings:
+        try:
+            pid = int(d.name[len(f".{out.name}.tmp-"):].split("-")[0])
+        except ValueError:
+            continue
+        if pid == os.getpid():
+            continue
+        try:
+            os.kill(pid, 0)
+            continue  # still running: its own write in progress
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            continue
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _fsync_dir(d: Path) -> None:
+    try:
+        fd = os.open(d, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_run_dir(out: str | os.PathLike[str], write: Callable[[Path], Any], *, what: str = "--out") -> Path:
+    """Write a whole run directory as a unit: ``write(tmp)`` fills a fresh temporary sibling directory,
+    which then replaces ``out`` (the previous ``out`` is kept as ``out.prev`` until the rename succeeded).
+
+    If ``write`` raises (or the process dies), ``out`` is untouched and the temporary directory is removed
+    (by the next write to ``out`` after a kill). Every file gets the same mode (``0666 & ~umask``).
+    Returns ``out``."""
+    out = check_run_dir(out, what=what)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SessionError(f"{what} {out}: cannot create {out.parent}: {e.strerror or e}") from None
+    _clean_stale_tmp(out)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
+    except OSError as e:
+        raise SessionError(f"{what} {out}: cannot write in {out.parent}: {e.strerror or e}") from None
+    prev = out.with_name(out.name + ".prev")
+    try:
+        os.chmod(tmp, 0o777 & ~_UMASK)
+        write(tmp)
+        for f in tmp.iterdir():
+            if f.is_file():
+                os.chmod(f, 0o666 & ~_UMASK)
+        _fsync_dir(tmp)
+        if out.exists():
+            if prev.exists():
+                shutil.rmtree(prev)  # a run directory left by an interrupted replace (checked above)
+            os.replace(out, prev)
+        os.replace(tmp, out)
+        _fsync_dir(out.parent)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if prev.exists() and not out.exists():
+            os.replace(prev, out)  # put the previous run directory back
+        raise
+    shutil.rmtree(prev, ignore_errors=True)
+    return out
+
+
+def summary_json(summary: dict[str, Any]) -> str:
+    """``summary`` as strict JSON text: NaN and ±inf become ``null`` (never a bare ``NaN``)."""
+    return json.dumps(_finite_or_none(summary), indent=2, default=_json_default, allow_nan=False) + "\n"
+
+
+def _finite_or_none(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _finite_or_none(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite_or_none(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _finite_or_none(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, Pose2):
+        return _finite_or_none([x.x, x.y, x.yaw])
+    return x
+
+
+def write_session_files(pipe: "Pipeline", out: Path, *, summary: dict[str, Any] | None = None) -> None:
+    """Write every file of a run directory into the existing directory ``out`` (see :func:`save_session`)."""
     from app.ocslam.mapio import save_map
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     pipe.cfg.save(out / "config.yaml")
     summary = summary if summary is not None else pipe.summary()
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=_json_default))
+    atomic_write_text(out / "summary.json", summary_json(summary))
     grid = pipe.slam.occupancy_grid()
     if grid.width and grid.height:
         save_map(grid, out / "map.yaml")
-    atomic_write_text(out / "objects.json", json.dumps(objects_json(pipe), indent=2, default=_json_default))
+    atomic_write_text(out / "objects.json", json.dumps(_finite_or_none(objects_json(pipe)), indent=2, default=_json_default))
     stamps, traj = pipe.slam.trajectory()
     atomic_write_text(out / "trajectory_slam.tum", tum_lines(stamps, traj))
     if pipe.truth_log:
@@ -158,12 +360,26 @@ def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] |
         write_recording(pipe, out)
     except Exception as e:  # the recording is a convenience; never lose the rest for it
         log.warning("scene recording not written: %s", e)
-    return out
+
+
+def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] | None = None, server: Any = None,
+                 extra: Callable[[Path], Any] | None = None) -> Path:
+    """Write the run directory ``out`` as a unit (:func:`write_run_dir`); ``extra(tmp)`` may add more to it
+    (e.g. a bag) before it is renamed into place. Returns ``out`` (absolute). :class:`SessionError` if
+    ``out`` cannot be a run directory (nothing is written then)."""
+
+    def write(d: Path) -> None:
+        write_session_files(pipe, d, summary=summary)
+        if extra is not None:
+            extra(d)
+
+    return write_run_dir(out, write)
 
 
 def session_state(pipe: "Pipeline") -> dict[str, Any]:
     return {
         "version": SESSION_VERSION,
+        "world": pipe.world.name,
         "sim_time": pipe.time,
         "T_world_base_true": pipe.sim.true_pose().as_array(),
         "T_odom_base": pipe.odometry.T_odom_base.as_array(),
@@ -173,24 +389,210 @@ def session_state(pipe: "Pipeline") -> dict[str, Any]:
     }
 
 
-def load_session(pipe: "Pipeline", path: str | Path) -> None:
-    """Restore map, pose graph, objects and the robot's state from a run directory, to continue mapping."""
-    from app.ocslam.consciousness import Consciousness
+# ----------------------------------------------------------------------------------------------
+# Reading and validating sessions
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class SessionData:
+    """A validated run directory: its config and its unpacked ``state.npz``."""
+
+    path: Path
+    cfg: Any  # app.config.Config
+    state: dict[str, Any]
+
+    @property
+    def world(self) -> str | None:
+        w = self.state.get("world")
+        return str(w) if w is not None else None
+
+    def slam(self, slam_cfg: Any = None) -> Any:
+        """The SLAM back end rebuilt from the state (checked: finite keyframe poses and trajectory)."""
+        return restore_slam(self.path, slam_cfg if slam_cfg is not None else self.cfg.slam, self.state)
+
+    def consciousness(self, cons_cfg: Any = None, camera_model: Any = None) -> Any:
+        """The object tracker rebuilt from the state (checked: finite poses, sizes and presences)."""
+        if camera_model is None:
+            from app.pipeline import build_camera_model
+            from app.robot_model import RobotModel
+
+            camera_model = build_camera_model(self.cfg, RobotModel.load())
+        return restore_consciousness(self.path, cons_cfg if cons_cfg is not None else self.cfg.consciousness,
+                                     camera_model, self.state)
+
+
+def _bad(path: Path, msg: str) -> SessionError:
+    return SessionError(f"{path}: corrupt session: {msg}")
+
+
+def _finite_array(path: Path, state: dict, key: str, shape: tuple[Any, ...], *, where: str = "") -> np.ndarray:
+    name = f"{where}{key}"
+    if key not in state:
+        raise _bad(path, f"'{name}' is missing")
+    try:
+        a = np.asarray(state[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise _bad(path, f"'{name}' is not numeric") from None
+    if shape and shape[-1] is Ellipsis:  # (N, ...): only the leading dimension is fixed by the format
+        shape = shape[:-1]
+        ok = a.ndim >= len(shape) and all(n is None or a.shape[i] == n for i, n in enumerate(shape))
+    else:
+        ok = a.ndim == len(shape) and all(n is None or a.shape[i] == n for i, n in enumerate(shape))
+    if not ok:
+        want = "(" + ", ".join("N" if n is None else str(n) for n in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise _bad(path, f"'{name}' has shape {a.shape}, expected {want}")
+    if not np.isfinite(a).all():
+        raise _bad(path, f"'{name}' has non-finite values (NaN or inf)")
+    return a
+
+
+def _finite_scalar(path: Path, state: dict, key: str, *, nonneg: bool = False, default: Any = None) -> float:
+    v = state.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not math.isfinite(float(v)):
+        raise _bad(path, f"'{key}' must be a finite number, got {v!r}")
+    if nonneg and float(v) < 0:
+        raise _bad(path, f"'{key}' must be ≥ 0, got {v!r}")
+    return float(v)
+
+
+def _check_slam_arrays(path: Path, d: Any) -> None:
+    """Shapes and finiteness of the SLAM state's arrays that exist (the back end checks the rest)."""
+    if not isinstance(d, dict):
+        raise _bad(path, "'slam' is not a mapping")
+    w = "slam."
+    checks = {"T_base_scan": (3,), "kf_poses": (None, 3), "kf_stamps": (None,), "kf_points": (None, 2),
+              "kf_ends": (None, 2), "kf_sensor": (None, 2), "edges_z": (None, 3), "edges_info": (None, ...),
+              "traj_stamps": (None,), "traj_rel": (None, 3), "traj_odom": (None, 3)}
+    arrs = {k: _finite_array(path, d, k, shp, where=w) for k, shp in checks.items() if k in d}
+    n_kf = len(arrs["kf_poses"]) if "kf_poses" in arrs else None
+
+    def rows(k: str) -> int:
+        a = np.asarray(d[k])
+        return int(a.shape[0]) if a.ndim else -1
+
+    for a, b in (("kf_poses", "kf_stamps"), ("kf_poses", "kf_npoints"), ("kf_poses", "kf_nends"), ("kf_poses", "kf_sensor"),
+                 ("kf_ends", "kf_hit"), ("edges_ij", "edges_z"), ("edges_z", "edges_info"), ("traj_stamps", "traj_anchor"),
+                 ("traj_stamps", "traj_rel"), ("traj_stamps", "traj_odom")):
+        if a in d and b in d and rows(a) != rows(b):
+            raise _bad(path, f"'{w}{a}' ({rows(a)} rows) and '{w}{b}' ({rows(b)} rows) differ in length")
+    for count, data in (("kf_npoints", "kf_points"), ("kf_nends", "kf_ends")):
+        if count in d and data in d:
+            c = np.asarray(d[count]).reshape(-1)
+            ok = c.size == 0 or (np.issubdtype(c.dtype, np.integer) and c.min() >= 0)
+            if not ok or int(c.sum()) != rows(data):
+                raise _bad(path, f"'{w}{count}' does not add up to the {rows(data)} rows of '{w}{data}'")
+    if n_kf is not None:
+        for key, cols in (("edges_ij", 2), ("traj_anchor", 1)):
+            if key in d:
+                a = np.asarray(d[key])
+                if a.size and (not np.issubdtype(a.dtype, np.integer) or a.min() < 0 or a.max() >= n_kf):
+                    raise _bad(path, f"'{w}{key}' refers to keyframes outside 0…{n_kf - 1}")
+                if cols == 2 and a.size and (a.ndim != 2 or a.shape[1] != 2):
+                    raise _bad(path, f"'{w}{key}' has shape {a.shape}, expected (N, 2)")
+
+
+def restore_slam(path: Path, slam_cfg: Any, state: dict[str, Any]) -> Any:
     from app.ocslam.slam import Slam
 
+    _check_slam_arrays(path, state.get("slam"))
+    try:
+        slam = Slam.from_state_dict(slam_cfg, state["slam"])
+    except Exception as e:
+        raise _bad(path, f"SLAM state: {type(e).__name__}: {e}") from None
+    try:
+        nodes = np.asarray(slam.pose_graph().nodes, dtype=np.float64)
+        _, traj = slam.trajectory()
+        traj = np.asarray(traj, dtype=np.float64)
+    except Exception as e:
+        raise _bad(path, f"SLAM state: {type(e).__name__}: {e}") from None
+    if not np.isfinite(nodes).all():
+        raise _bad(path, "a keyframe pose is not finite")
+    if not np.isfinite(traj).all():
+        raise _bad(path, "a trajectory pose is not finite")
+    return slam
+
+
+def restore_consciousness(path: Path, cons_cfg: Any, camera_model: Any, state: dict[str, Any]) -> Any:
+    from app.ocslam.consciousness import Consciousness
+
+    if not isinstance(state.get("consciousness"), dict):
+        raise _bad(path, "'consciousness' is missing or not a mapping")
+    try:
+        cons = Consciousness.from_state_dict(state["consciousness"], cons_cfg, camera_model)
+        objects = list(cons.objects)
+    except Exception as e:
+        raise _bad(path, f"object state: {type(e).__name__}: {e}") from None
+    for o in objects:
+        vals = {"x": o.pose.x, "y": o.pose.y, "yaw": o.pose.yaw, "size_x": o.size_x, "size_y": o.size_y,
+                "size_z": o.size_z, "presence": o.presence}
+        for k, v in vals.items():
+            if not math.isfinite(float(v)):
+                raise _bad(path, f"object {o.id} ({o.label}): {k} is not finite")
+        if min(o.size_x, o.size_y, o.size_z) < 0:
+            raise _bad(path, f"object {o.id} ({o.label}): negative size")
+        if not 0.0 <= o.presence <= 1.0:
+            raise _bad(path, f"object {o.id} ({o.label}): presence {o.presence} is outside [0, 1]")
+    return cons
+
+
+def read_session(path: str | os.PathLike[str], *, need_config: bool = True) -> SessionData:
+    """Read and check a run directory's ``config.yaml`` and ``state.npz`` (version, required fields,
+    finite sim time and poses). :class:`SessionError` (or ``ConfigError`` for a bad config) otherwise.
+    The SLAM and object states are checked when rebuilt (:meth:`SessionData.slam`/``consciousness``)."""
+    from app.config import Config
+
     path = Path(path)
+    if not path.is_dir():
+        prev = path.with_name(path.name + ".prev")
+        hint = f" (an interrupted save left the previous session at {prev})" if prev.is_dir() else ""
+        if path.exists():
+            raise SessionError(f"{path} is a file, not a session directory")
+        raise SessionError(f"{path}: no such session directory{hint}")
     f = path / "state.npz"
     if not f.is_file():
-        raise FileNotFoundError(f"{path} is not a session directory (no state.npz); save one with 'Save session'")
+        raise SessionError(f"{path} is not a session directory (no state.npz); save one with 'Save session' or a headless run")
+    c = path / "config.yaml"
+    cfg = None
+    if need_config:
+        if not c.is_file():
+            raise SessionError(f"{path}: no config.yaml (a run directory holds the config it was made with)")
+        cfg = Config.load(c)
     try:
         with np.load(f, allow_pickle=False) as z:
-            state = unpack_state({k: z[k] for k in z.files})
-    except Exception as e:
-        raise ValueError(f"{f}: unreadable session state ({e})") from None
-    if int(state.get("version", 0)) != SESSION_VERSION:
-        raise ValueError(f"{f}: session version {state.get('version')} is not {SESSION_VERSION}")
-    slam = Slam.from_state_dict(pipe.cfg.slam, state["slam"])
-    cons = Consciousness.from_state_dict(state["consciousness"], pipe.cfg.consciousness, pipe.camera_model)
+            arrays = {k: z[k] for k in z.files}
+        state = unpack_state(arrays)
+    except Exception as e:  # BadZipFile, zlib/EOF errors, missing arrays, bad JSON
+        raise SessionError(f"{f}: unreadable session state ({type(e).__name__}: {e})") from None
+    if not isinstance(state, dict):
+        raise _bad(path, "the state is not a mapping")
+    version = state.get("version")
+    if isinstance(version, bool) or not isinstance(version, int) or version not in READABLE_VERSIONS:
+        raise SessionError(f"{f}: session version {version!r} is not one this OCSLAM reads ({', '.join(map(str, READABLE_VERSIONS))})")
+    if version >= 2 and not (isinstance(state.get("world"), str) and state["world"]):
+        raise _bad(path, "'world' (the world's name) is missing")
+    _finite_scalar(path, state, "sim_time", nonneg=True)
+    _finite_scalar(path, state, "odometry_distance", nonneg=True, default=0.0)
+    _finite_array(path, state, "T_world_base_true", (3,))
+    _finite_array(path, state, "T_odom_base", (3,))
+    for k in ("slam", "consciousness"):
+        if not isinstance(state.get(k), dict):
+            raise _bad(path, f"'{k}' is missing or not a mapping")
+    return SessionData(path, cfg, state)
+
+
+def load_session(pipe: "Pipeline", path: str | Path) -> None:
+    """Restore map, pose graph, objects and the robot's state from a run directory, to continue mapping.
+
+    Everything is read and checked first (:func:`read_session`, world name, rebuilt SLAM and objects); on
+    any problem :class:`SessionError` is raised and the running pipeline is unchanged."""
+    data = read_session(path)
+    if data.world is not None and data.world != pipe.world.name:
+        raise SessionError(f"{data.path}: the session was recorded in world {data.world!r}, not in the loaded world "
+                           f"{pipe.world.name!r}; load that world first")
+    slam = data.slam(pipe.cfg.slam)
+    cons = data.consciousness(pipe.cfg.consciousness, pipe.camera_model)
+    state = data.state
     pipe.sim.set_robot_pose(Pose2.from_array(state["T_world_base_true"]))
     pipe.restart_clock(float(state["sim_time"]))
     pipe.slam = slam
@@ -220,9 +622,8 @@ def recording_html(scene_bytes: bytes, dark_mode: bool = False) -> str:
     return client[:i] + inject + client[i:]
 
 
-def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> None:
-    """A `.viser` recording (and a self-contained HTML player): the final map, objects and graph, with the
-    robot replaying its SLAM trajectory."""
+def recording_bytes(pipe: "Pipeline", *, max_frames: int = 400) -> bytes:
+    """A `.viser` recording: the final map, objects and graph, with the robot replaying its SLAM trajectory."""
     from app.ui.scene import SceneLayers
     from app.ui.security import create_server
 
@@ -242,9 +643,14 @@ def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> No
                 T = Pose2.from_array(traj[i])
                 layers._set_pose(layers.robot_root, T)
                 rec.insert_sleep(min(max(dt / 4.0, 0.02), 0.25))  # 4× faster than real time
-        data = rec.serialize()
-        atomic_write_bytes(out / "scene.viser", data)
-        atomic_write_text(out / "scene.html", recording_html(data))
+        return rec.serialize()
     finally:
         with contextlib.redirect_stdout(io.StringIO()):
             server.stop()
+
+
+def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> None:
+    """``out/scene.viser`` and ``out/scene.html`` (a self-contained player), each written atomically."""
+    data = recording_bytes(pipe, max_frames=max_frames)
+    atomic_write_bytes(out / "scene.viser", data)
+    atomic_write_text(out / "scene.html", recording_html(data))

@@ -9,7 +9,7 @@ import pytest
 
 from app.config import ASSETS, Config
 from app.pipeline import Pipeline
-from app.session import load_session, pack_state, save_session, unpack_state
+from app.session import SessionError, load_session, pack_state, save_session, summary_json, unpack_state, write_run_dir
 
 DETECTOR = "yolo" if (ASSETS / "models" / "detector.onnx").is_file() else "oracle"
 
@@ -73,11 +73,81 @@ def test_load_session_errors(tmp_path) -> None:
     cfg = Config.load(None, ["detector.kind=none"])
     p = Pipeline(cfg)
     try:
-        with pytest.raises(FileNotFoundError, match="not a session directory"):
+        with pytest.raises(SessionError, match="not a session directory"):
             load_session(p, tmp_path)
         (tmp_path / "state.npz").write_bytes(b"corrupt")
-        with pytest.raises(ValueError, match="unreadable session state"):
+        with pytest.raises(SessionError, match="no config.yaml"):
+            load_session(p, tmp_path)
+        cfg.save(tmp_path / "config.yaml")
+        with pytest.raises(SessionError, match="unreadable session state"):
             load_session(p, tmp_path)
         assert p.slam.occupancy_grid() is not None  # the running map is untouched
     finally:
         p.close()
+
+
+def _files(d):
+    return {f.name: f.read_bytes() for f in sorted(d.iterdir())}
+
+
+def test_run_dir_is_replaced_as_a_unit(tmp_path) -> None:
+    out = tmp_path / "run"
+
+    def first(d):
+        (d / "summary.json").write_text("{}")
+        (d / "map.pgm").write_text("old map")
+
+    def second(d):
+        (d / "summary.json").write_text('{"new": 1}')
+
+    assert write_run_dir(out, first) == out
+    assert _files(out) == {"map.pgm": b"old map", "summary.json": b"{}"}
+    write_run_dir(out, second)
+    assert _files(out) == {"summary.json": b'{"new": 1}'}  # no stale map beside the new summary
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no .prev, no temporary directory left
+    mode = out.stat().st_mode & 0o777
+    assert all((f.stat().st_mode & 0o777) == (mode & 0o666) for f in out.iterdir())
+
+
+def test_a_failed_write_leaves_the_previous_run_directory(tmp_path) -> None:
+    out = tmp_path / "run"
+    write_run_dir(out, lambda d: (d / "summary.json").write_text("old"))
+    before = _files(out)
+
+    def broken(d):
+        (d / "summary.json").write_text("half")
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_run_dir(out, broken)
+    assert _files(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_killed_write_is_cleaned_up_by_the_next(tmp_path) -> None:
+    out = tmp_path / "run"
+    stale = tmp_path / f".run.tmp-{2**22 + 12345}-abc"  # a pid that does not exist
+    stale.mkdir()
+    (stale / "state.npz").write_text("partial")
+    write_run_dir(out, lambda d: (d / "summary.json").write_text("{}"))
+    assert not stale.exists() and _files(out) == {"summary.json": b"{}"}
+
+
+@pytest.mark.parametrize("setup, message", [
+    (lambda p: p.write_text("x"), "is a file, not a directory"),
+    (lambda p: (p.mkdir(), (p / "notes.txt").write_text("mine")), "is not a run directory"),
+    (lambda p: (p.mkdir(), (p / "sub").mkdir(), (p / "summary.json").write_text("{}")), "is not a run directory"),
+])
+def test_what_is_not_a_run_directory_is_refused(tmp_path, setup, message) -> None:
+    out = tmp_path / "out"
+    setup(out)
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    with pytest.raises(SessionError, match=message):
+        write_run_dir(out, lambda d: (d / "summary.json").write_text("{}"))
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == before
+
+
+def test_summary_json_is_strict_json() -> None:
+    text = summary_json({"a": float("nan"), "b": [1.0, float("inf")], "c": np.float64(2.5), "d": {"e": np.nan}})
+    assert json.loads(text, parse_constant=lambda c: pytest.fail(f"bare {c}")) == {"a": None, "b": [1.0, None], "c": 2.5,
+                                                                                      "d": {"e": None}}

@@ -15,7 +15,7 @@ import argparse
 import json
 from pathlib import Path
 
-from app.config import Config, atomic_write_text
+from app.config import ConfigError, atomic_write_text
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,88 +44,82 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     q.add_argument("--out", type=Path, required=True)
 
 
-def _state(session: Path) -> dict:
-    import numpy as np
-
-    from app.session import unpack_state
-
-    f = session / "state.npz"
-    if not f.is_file():
-        raise FileNotFoundError(f"{session} is not a session directory (no state.npz)")
-    with np.load(f, allow_pickle=False) as z:
-        return unpack_state({k: z[k] for k in z.files})
-
-
-def _config(session: Path) -> Config:
-    c = session / "config.yaml"
-    return Config.load(c) if c.is_file() else Config()
-
-
 def run(args: argparse.Namespace) -> int:
     what = args.what
     if what == "config":
         from app.commands.run import config_from_args
+        from app.session import check_out_file
 
-        out = config_from_args(args).save(args.out)
+        cfg = config_from_args(args)
+        out = cfg.save(check_out_file(args.out))
         print(f"wrote {out}")
         return 0
     if what == "session":
-        from app.commands.run import config_from_args, run_headless
+        from app.commands.run import check_duration, config_from_args, run_headless
 
+        check_duration(args.duration)
         return run_headless(config_from_args(args), route=args.route, explore=args.explore, duration=args.duration,
                             out=args.out)
+    from app.session import check_out_file, read_session
+
     session: Path = args.session
-    cfg = _config(session)
-    state = _state(session)
+    data = read_session(session)  # SessionError for a missing/corrupt session or a missing config.yaml
+    cfg, state = data.cfg, data.state
     if what == "map":
         from app.ocslam.mapio import save_map
-        from app.ocslam.slam import Slam
 
-        grid = Slam.from_state_dict(cfg.slam, state["slam"]).occupancy_grid()
-        out = save_map(grid, args.out)
+        out = check_out_file(args.out)
+        if out.suffix.lower() == ".pgm":
+            raise ConfigError(f"--out {args.out}: give the map's YAML file (its PGM is written beside it)")
+        grid = data.slam().occupancy_grid()
+        if not (grid.width and grid.height):
+            raise ConfigError(f"{session}: the session's map is empty (no keyframes)")
+        out = save_map(grid, out)
         print(f"wrote {out} and its PGM ({grid.width}×{grid.height} cells at {grid.resolution} m)")
         return 0
     if what == "trajectory":
-        from app.ocslam.slam import Slam
         from app.session import tum_lines
 
-        stamps, poses = Slam.from_state_dict(cfg.slam, state["slam"]).trajectory()
-        atomic_write_text(args.out, tum_lines(stamps, poses))
+        out = check_out_file(args.out)
+        stamps, poses = data.slam().trajectory()
+        atomic_write_text(out, tum_lines(stamps, poses))
         print(f"wrote {args.out} ({len(stamps)} poses)")
         return 0
     if what == "objects":
-        from app.ocslam.consciousness import Consciousness
-        from app.pipeline import build_camera_model
-        from app.robot_model import RobotModel
-        from app.session import object_to_detection3d
+        from app.session import _finite_or_none, object_to_detection3d
 
-        cons = Consciousness.from_state_dict(state["consciousness"], cfg.consciousness,
-                                             build_camera_model(cfg, RobotModel.load()))
-        objects = cons.objects
+        out = check_out_file(args.out)
+        objects = data.consciousness().objects
         thr = cfg.consciousness.presence_threshold
         frame = "map"
         dets = [object_to_detection3d(o, float(state.get("sim_time", 0.0)), o.frame_id or frame)
                 for o in objects if args.all or o.presence >= thr]
-        atomic_write_text(args.out, json.dumps({"frame_id": frame, "presence_threshold": thr, "detections": dets}, indent=2))
+        doc = {"frame_id": frame, "presence_threshold": thr, "detections": dets}
+        atomic_write_text(out, json.dumps(_finite_or_none(doc), indent=2, allow_nan=False))
         print(f"wrote {args.out} ({len(dets)} objects)")
         return 0
     if what == "recording":
+        from app.config import atomic_write_bytes
         from app.pipeline import Pipeline
-        from app.session import load_session, write_recording
+        from app.session import load_session, recording_bytes, recording_html
 
+        out = check_out_file(args.out)
+        html = out.with_suffix(".html")
+        if html == out:
+            raise ConfigError(f"--out {args.out}: name the .viser file; the .html player is written beside it")
+        check_out_file(html, what="the player")
+        data.slam()  # checked before the (slow) pipeline is built
+        data.consciousness()
         cfg.set("detector.kind", "none")
         pipe = Pipeline(cfg)
         try:
             load_session(pipe, session)
-            tmp = args.out.parent
-            tmp.mkdir(parents=True, exist_ok=True)
-            write_recording(pipe, tmp)
-            (tmp / "scene.viser").replace(args.out)
-            html = tmp / "scene.html"
-            if html.exists():
-                html.replace(args.out.with_suffix(".html"))
+            scene = recording_bytes(pipe)
         finally:
             pipe.close()
-        print(f"wrote {args.out}")
+        # exactly these two names, each written atomically beside itself: nothing else is replaced
+        atomic_write_bytes(out, scene)
+        atomic_write_text(html, recording_html(scene))
+        print(f"wrote {args.out} and {html.name}")
         return 0
     raise SystemExit(f"unknown export {what!r}")

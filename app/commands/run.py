@@ -10,13 +10,13 @@ Examples:
 from __future__ import annotations
 
 import argparse
-import json
+import math
 import signal
 import sys
 import time
 from pathlib import Path
 
-from app.config import Config, atomic_write_text
+from app.config import Config, ConfigError
 
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
@@ -56,9 +56,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-token", action="store_true",
                    help="with a non-loopback --host: no access token (anyone who can reach the port drives the robot)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--record", nargs="?", const="", default=None, metavar="BAG",
+                   help="headless: record a rosbag2 MCAP bag folder (default: <out>/bag); docs/ros2.md")
+
+
+def check_duration(duration: float | None, what: str = "--duration") -> float | None:
+    """``None`` or a positive finite number of sim seconds; :class:`ConfigError` otherwise."""
+    if duration is None:
+        return None
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) or duration <= 0:
+        raise ConfigError(f"{what} must be a positive number of sim seconds, got {duration!r}")
+    return float(duration)
 
 
 def run(args: argparse.Namespace) -> int:
+    check_duration(args.duration)
     cfg = config_from_args(args)
     if args.host is not None:
         cfg.set("server.host", args.host)
@@ -68,7 +80,10 @@ def run(args: argparse.Namespace) -> int:
         cfg.set("server.require_token", False)
     if args.headless:
         return run_headless(cfg, route=args.route, explore=args.explore, duration=args.duration, out=args.out,
-                            quiet=args.quiet)
+                            quiet=args.quiet, record=args.record)
+    if args.record is not None:
+        print("ocslam: warning: --record records headless runs only (the web app's Record toggle is not wired yet)",
+              file=sys.stderr)
     from app.server import serve
 
     return serve(cfg)
@@ -82,21 +97,41 @@ def run_headless(
     duration: float | None = None,
     out: Path | None = None,
     quiet: bool = False,
+    record: str | None = None,
 ) -> int:
-    """Drive the route (or explore) with no browser; write ``config.yaml`` and ``summary.json`` to ``out``."""
-    from app.pipeline import Pipeline
+    """Drive the route (or explore) with no browser; write the run directory ``out`` as a unit at the end.
 
-    out = out or Path("runs") / time.strftime("run-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    cfg.save(out / "config.yaml")
-    pipe = Pipeline(cfg)
-    if pipe.detector_error and cfg.detector.kind != "none":
-        print(f"ocslam: warning: {pipe.detector_error}", file=sys.stderr)
-    if explore:
-        pipe.explore()
-    else:
-        pipe.follow_route(route or cfg.sim.route)
+    Nothing in ``out`` is touched before the world, the route and the config have loaded: ``out`` is only
+    checked (:func:`app.session.check_run_dir`), and written by :func:`app.session.save_session`.
+    ``summary["end_reason"]`` is ``"duration"`` when ``duration`` stopped the run, ``"interrupted"``
+    after Ctrl-C, otherwise the navigation status (route done, exploration done)."""
+    from app.config import resolve_path
+    from app.pipeline import Pipeline
+    from app.session import check_run_dir, save_session
+    from app.worlds import load_world
+
+    duration = check_duration(duration)
+    out = check_run_dir(out or Path("runs") / time.strftime("run-%Y%m%d-%H%M%S"))
+    world = load_world(resolve_path(cfg.sim.world))
+    if not explore:
+        world.route(route or cfg.sim.route)  # WorldError naming the routes the world has
+    pipe = Pipeline(cfg, world=world)
+    try:
+        if pipe.detector_error and cfg.detector.kind != "none":
+            print(f"ocslam: warning: {pipe.detector_error}", file=sys.stderr)
+        if explore:
+            pipe.explore()
+        else:
+            pipe.follow_route(route or cfg.sim.route)
+    except BaseException:
+        pipe.close()
+        raise
     limit = duration if duration is not None else (1800.0 if explore else 1200.0)
+    rec = None
+    if record is not None:  # a rosbag2 MCAP bag of the run (app/ros2/recorder.py)
+        from app.ros2.recorder import attach, staging_path
+
+        rec = attach(pipe, Path(record) if record else staging_path(out))
 
     interrupted = {"flag": False}
 
@@ -114,8 +149,12 @@ def run_headless(
             bar = None
     pipe.wall_start = time.perf_counter()
     last_shown = 0.0
+    timed_out = False
     try:
-        while pipe.time < limit and not interrupted["flag"]:
+        while not interrupted["flag"]:
+            if pipe.time >= limit - 1e-9:
+                timed_out = True
+                break
             pipe.step()
             if pipe.drive_mode == "idle" and pipe.nav_status:
                 break  # route done / exploration done / stopped
@@ -130,17 +169,28 @@ def run_headless(
         if bar is not None:
             bar.close()
         pipe.wall_time_s = time.perf_counter() - pipe.wall_start
-        summary = pipe.summary()
-        summary["end_reason"] = "interrupted" if interrupted["flag"] else (pipe.nav_status or "duration")
-        if explore:
-            summary.update(pipe.coverage_summary())
-        try:
-            from app.session import save_session
+        if rec is not None:
+            from app.ros2.recorder import detach
 
-            save_session(pipe, out, summary=summary)
-        except ImportError:
-            atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float))
-        pipe.close()
+            detach(pipe, rec)
+        try:
+            summary = pipe.summary()
+            summary["end_reason"] = (
+                "interrupted" if interrupted["flag"] else "duration" if timed_out else (pipe.nav_status or "stopped")
+            )
+            summary["duration_limit_s"] = limit
+            if explore:
+                summary.update(pipe.coverage_summary())
+            extra = None
+            if rec is not None and not record:
+                from app.ros2.recorder import move_into_run_dir
+
+                def extra(d: Path) -> None:  # the staged bag goes into the unit before it is renamed into place
+                    move_into_run_dir(rec, d)
+
+            save_session(pipe, out, summary=summary, extra=extra)
+        finally:
+            pipe.close()
     if not quiet:
         keys = ("sim_time_s", "wall_time_s", "real_time_factor", "distance_m", "odom_final_error_m",
                 "slam_ate_rmse_m", "map_precision", "map_recall", "objects_recall", "objects_precision_strict",

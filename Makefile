@@ -9,7 +9,7 @@ PORT ?= 8080
 ARGS ?=
 PYTEST_ARGS ?=
 
-.PHONY: setup run test test-fast bench train browser lint clean help
+.PHONY: setup run test test-fast bench train browser strace lint clean help
 
 help:
 	@echo "make run    set up .venv and start the web app on http://$(HOST):$(PORT)"
@@ -49,7 +49,20 @@ browser:
 	  echo "      (or set OCSLAM_CHROMIUM=/path/to/chromium); the browser tests will be skipped."; \
 	fi
 
-test: $(VENV)/.installed-test browser
+# Debian's strace for the no-outbound-traffic test (tests/test_bad_inputs_server.py; skipped without it).
+strace:
+	@if command -v strace >/dev/null 2>&1; then \
+	  true; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing Debian's strace for the no-outbound-traffic test"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq strace >/dev/null) \
+	    || echo "WARNING: apt-get install strace failed; the no-outbound-traffic test will be skipped"; \
+	else \
+	  echo "NOTE: strace is not installed and this is not root: run 'sudo apt-get install strace'"; \
+	  echo "      (the no-outbound-traffic test will be skipped)."; \
+	fi
+
+test: $(VENV)/.installed-test browser strace
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 test-fast: $(VENV)/.installed-test

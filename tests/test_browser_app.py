@@ -26,8 +26,9 @@ DETECTOR = "yolo" if (ASSETS / "models" / "detector.onnx").is_file() else "oracl
 
 
 @pytest.fixture(scope="module")
-def app():
-    cfg = Config.load(None, [f"detector.kind={DETECTOR}", "server.port=0", "sim.speed=2"])
+def app(tmp_path_factory):
+    runs = tmp_path_factory.mktemp("runs")  # GUI paths are confined to server.runs_dir (docs/security.md)
+    cfg = Config.load(None, [f"detector.kind={DETECTOR}", "server.port=0", "sim.speed=2", f"server.runs_dir={runs}"])
     a = OcslamApp(cfg).start()
     a.submit(lambda p: p.follow_route("tour"))
     try:
@@ -165,9 +166,9 @@ def test_save_config_then_config_flag_reproduces_it(app, pages, tmp_path) -> Non
     page.get_by_role("tab", name="Tune").click()
     _click_slider(page, "tracking_threshold_m", 0.5)
     wait_for(lambda: abs(app.cfg.consciousness.tracking_threshold_m - 0.30) > 0.05, what="tracking threshold changed")
-    target = tmp_path / "saved.yaml"
+    target = app.runs_root / "saved.yaml"
     box = _text_input(page, "Save to")
-    box.fill(str(target))
+    box.fill("saved.yaml")  # relative to server.runs_dir
     box.press("Enter")
     page.get_by_role("button", name="Save config").click()
     wait_for(target.is_file, what="the saved config")

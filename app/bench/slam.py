@@ -1,12 +1,21 @@
 """SLAM on a CARMEN log against the Kümmerle et al. (2009) ground-truth relations.
 
     ocslam bench slam DIR [--json] [--out DIR] [--limit-seconds S]
+    ocslam bench slam --suite synthetic [--buildings corridor,wings,symmetric] [--json]
+    ocslam bench slam --suite perturbed [--data ../shared/datasets] [--logs intel,aces]
+                      [--perturbations drop,resample,noise,mid] [--limit-seconds S] [--json]
 
 DIR holds one CARMEN log (``*.clf.bz2``, ``*.clf``, ``*.log``, ``*.gz``) and one ``*.relations`` file
 (for example ``../shared/datasets/intel``). The whole log runs through :class:`app.ocslam.slam.Slam` with
 the default :class:`~app.ocslam.config.SlamConfig` (one parameter set for every log), then every relation
 is scored on the corrected trajectory (poses at the scans' own stamps). The report, the trajectory
 (TUM), the map (PNG, and map_server YAML + PGM) go to ``--out`` (default ``runs/bench-slam-<name>/``).
+
+Before the run it prints what it inferred from the log (beams, angular increment, field of view, maximum
+range, sensor offset, odometry source). ``--suite synthetic`` maps the synthetic buildings of
+:mod:`app.ocslam.slam.buildings` (truth known: relation and heading errors, false loop closures);
+``--suite perturbed`` runs the logs with every second scan dropped, resampled to 0.5°, with 2 cm range
+noise, and started half-way (:mod:`app.ocslam.slam.perturb`).
 
 Scans are fed in file order. Some logs (Intel) have ipc timestamps that step backwards by up to 0.6 s
 although the file order is the true order; such scans get a stamp just after their predecessor for
@@ -16,6 +25,7 @@ the SLAM, and relations are matched to scans by their exact original stamps.
 from __future__ import annotations
 
 import argparse
+import math
 import datetime as _dt
 import json
 import os
@@ -53,7 +63,12 @@ _LOG_SUFFIXES = (".clf.bz2", ".clf", ".log", ".log.gz", ".clf.gz", ".log.bz2")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dir", type=Path, help="directory with one CARMEN log and one .relations file")
+    p.add_argument("dir", type=Path, nargs="?", default=None, help="directory with one CARMEN log and one .relations file")
+    p.add_argument("--suite", choices=("synthetic", "perturbed"), default=None, help="run a robustness suite instead of one log")
+    p.add_argument("--buildings", default="corridor,wings,symmetric", help="synthetic suite: buildings to map")
+    p.add_argument("--data", type=Path, default=None, help="perturbed suite: directory holding the logs' directories (default ../shared/datasets)")
+    p.add_argument("--logs", default="intel,aces", help="perturbed suite: log directories under --data")
+    p.add_argument("--perturbations", default="drop,resample,noise,mid", help="perturbed suite: which perturbations")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     p.add_argument("--out", type=Path, default=None, help="output directory (default runs/bench-slam-<name>/)")
     p.add_argument("--limit-seconds", type=float, default=None, help="only the first S seconds of data")
@@ -95,39 +110,51 @@ def _cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-    from app.ocslam.mapio import save_map
-
-    log_path, rel_path = _find(Path(args.dir))
-    name = _dataset_name(log_path)
-    out = Path(args.out) if args.out else Path("runs") / f"bench-slam-{name}"
-    cfg = SlamConfig()
+def _config(sets: list[str]) -> SlamConfig | None:
     import dataclasses
 
+    cfg = SlamConfig()
     fields = {f.name: f for f in dataclasses.fields(cfg)}
-    for kv in args.set:
+    for kv in sets:
         key, _, val = kv.partition("=")
         key = key.removeprefix("slam.")
         if key not in fields:
             print(f"ocslam bench slam: unknown SlamConfig field {key!r}", file=sys.stderr)
-            return 2
+            return None
         setattr(cfg, key, coerce_value("slam", fields[key], val))
+    return cfg
 
-    load_before = os.getloadavg()
-    t_read = time.perf_counter()
-    log = read_carmen(log_path)
-    rel = read_relations(rel_path)
-    read_s = time.perf_counter() - t_read
+
+def inferred_lines(log) -> list[str]:
+    """Human-readable lines of what the reader inferred from the log."""
+    inf = log.inferred or {}
+    T = inf.get("T_base_scan", [log.T_base_scan.x, log.T_base_scan.y, log.T_base_scan.yaw])
+    lines = [
+        f"beams {inf.get('beams')} (counts {inf.get('beam_counts')}), first beam {inf.get('angle_min_deg', float('nan')):+.1f}°, "
+        f"increment {inf.get('angle_increment_deg', float('nan')):.3f}°, field of view {inf.get('fov_deg', float('nan')):.1f}°",
+        f"max range {log.max_range:.2f} m ({inf.get('max_range_source', '?')}): readings at it are no return "
+        f"({100 * inf.get('no_return_fraction', float('nan')):.1f} % of beams)",
+        f"T_base_scan x {T[0]:+.3f} m y {T[1]:+.3f} m yaw {math.degrees(T[2]):+.2f}° ({inf.get('T_base_scan_source', '?')})",
+        f"odometry: {inf.get('odometry_source', '?')}; timestamps stepping back: {inf.get('stamps_stepping_back', 0)}",
+    ]
+    if inf.get("perturbation"):
+        lines.append(f"perturbation: {inf['perturbation']}")
+    return lines
+
+
+def run_log(log, rel: Relations, cfg: SlamConfig, name: str, limit_seconds: float | None = None, progress: bool = True) -> dict:
+    """Run :class:`Slam` over ``log`` (file order) and score it on ``rel``. Returns a dict with the report
+    fields plus ``_slam``, ``_est`` ``(n, 3)``, ``_stamps`` ``(n,)`` and ``_odo`` (raw odometry summary)."""
+    from tqdm import tqdm
+
     n = len(log)
-    if args.limit_seconds is not None:
-        n = int(np.searchsorted(log.stamps, log.stamps[0] + args.limit_seconds, side="right"))
-        n = max(1, n)
+    if limit_seconds is not None:
+        n = max(1, int(np.searchsorted(log.stamps, log.stamps[0] + limit_seconds, side="right")))
     slam = Slam(cfg, log.T_base_scan)
+    load_before = os.getloadavg()
     t0, c0 = time.perf_counter(), _cpu_s()
     last = -np.inf
-    bar = tqdm(total=n, desc=f"slam {name}", unit="scan", file=sys.stderr, disable=args.no_progress, mininterval=1.0)
+    bar = tqdm(total=n, desc=f"slam {name}", unit="scan", file=sys.stderr, disable=not progress, mininterval=1.0)
     for i in range(n):
         sc = log.scan(i)
         st = max(sc.stamp, np.nextafter(last, np.inf)) if np.isfinite(last) else sc.stamp
@@ -142,7 +169,6 @@ def run(args: argparse.Namespace) -> int:
     wall_s = time.perf_counter() - t0
     cpu_s = _cpu_s() - c0
     bar.close()
-    grid = slam.occupancy_grid(budget=10**9)
     load_after = os.getloadavg()
 
     # poses at the scans' own (original) stamps, in file order
@@ -151,18 +177,19 @@ def run(args: argparse.Namespace) -> int:
         raise RuntimeError(f"trajectory has {len(est)} poses for {n} scans (skipped: {dict(slam.skipped)})")
     stamps = log.stamps[:n]
     index = {float(t): i for i, t in enumerate(stamps)}
-    t_end = float(stamps.max())
-    keep = np.array([(a in index or a <= t_end) and (b in index or b <= t_end) for a, b in zip(rel.t1, rel.t2)], bool)
+    t_lo, t_end = float(stamps.min()), float(stamps.max())
+    keep = np.array([(a in index or t_lo <= a <= t_end) and (b in index or t_lo <= b <= t_end) for a, b in zip(rel.t1, rel.t2)], bool)
     rel = Relations(rel.t1[keep], rel.t2[keep], rel.motion[keep])
     order = np.argsort(stamps, kind="stable")
 
     def lookup(poses: np.ndarray, t: np.ndarray) -> np.ndarray:
-        idx = np.array([index.get(float(v), -1) for v in t])
+        idx = np.array([index.get(float(v), -1) for v in t], dtype=np.int64)
         out_p = interpolate(t, stamps[order], poses[order])
         out_p[idx >= 0] = poses[idx[idx >= 0]]
         return out_p
 
     pseudo = np.arange(len(rel) * 2, dtype=np.float64)  # evaluate on looked-up poses directly
+
     def errors(poses: np.ndarray):
         p = np.empty((2 * len(rel), 3))
         p[0::2] = lookup(poses, rel.t1)
@@ -170,36 +197,89 @@ def run(args: argparse.Namespace) -> int:
         r = Relations(pseudo[0::2], pseudo[1::2], rel.motion)
         return relation_errors(pseudo, p, r, max_gap_s=0.25)
 
-    res = errors(est).summary()
-    odo = errors(log.odom[:n]).summary()
+    res = errors(est).summary() if len(rel) else {"relations": 0}
+    odo = errors(log.odom[:n]).summary() if len(rel) else {}
     duration = float(stamps.max() - stamps.min()) if n > 1 else 0.0
     g = slam.pose_graph()
-    report = {
+    m = slam.metrics()
+    return {
         "dataset": name,
         **res,
-        "odom_trans_mean_m": odo["trans_mean_m"],
-        "odom_trans_std_m": odo["trans_std_m"],
-        "odom_rot_mean_deg": odo["rot_mean_deg"],
-        "odom_rot_std_deg": odo["rot_std_deg"],
+        "odom_trans_mean_m": odo.get("trans_mean_m"),
+        "odom_trans_std_m": odo.get("trans_std_m"),
+        "odom_rot_mean_deg": odo.get("rot_mean_deg"),
+        "odom_rot_std_deg": odo.get("rot_std_deg"),
         "wall_s": wall_s,
         "cpu_s": cpu_s,
-        "read_s": read_s,
         "duration_s": duration,
         "scans": n,
         "keyframes": int(len(g.nodes)),
         "edges": int(len(g.edges)),
         "loop_edges": int(g.is_loop.sum()),
+        "loops_rejected": int(m["slam_loops_rejected"]),
+        "loops_rejected_by": m["slam_loops_rejected_by"],
+        "loop_candidates": int(m["slam_loop_candidates"]),
         "loop_searches": int(slam.loops.searches),
         "corrections": int(slam.correction_count),
         "skipped": dict(slam.skipped),
         "stats": dict(slam.stats),
+        "inferred": dict(log.inferred or {}),
         "load_avg_before": list(load_before),
         "load_avg_after": list(load_after),
+        "_slam": slam,
+        "_est": est,
+        "_stamps": stamps,
+        "_odo": odo,
+    }
+
+
+def _public(rep: dict) -> dict:
+    return {k: v for k, v in rep.items() if not k.startswith("_")}
+
+
+def _command() -> str:
+    return "ocslam bench slam " + " ".join(sys.argv[3:] if sys.argv[1:3] == ["bench", "slam"] else sys.argv[1:])
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = _config(args.set)
+    if cfg is None:
+        return 2
+    if args.suite == "synthetic":
+        return _run_synthetic(args, cfg)
+    if args.suite == "perturbed":
+        return _run_perturbed(args, cfg)
+    if args.dir is None:
+        print("ocslam bench slam: give a log directory or --suite synthetic|perturbed", file=sys.stderr)
+        return 2
+    from app.ocslam.mapio import save_map
+
+    log_path, rel_path = _find(Path(args.dir))
+    name = _dataset_name(log_path)
+    out = Path(args.out) if args.out else Path("runs") / f"bench-slam-{name}"
+    t_read = time.perf_counter()
+    log = read_carmen(log_path)
+    rel = read_relations(rel_path)
+    read_s = time.perf_counter() - t_read
+    if not args.json:
+        print(f"{name}: inferred from the log")
+        for line in inferred_lines(log):
+            print("  " + line)
+    rep = run_log(log, rel, cfg, name, args.limit_seconds, progress=not args.no_progress)
+    slam, est, stamps, odo = rep["_slam"], rep["_est"], rep["_stamps"], rep["_odo"]
+    res = rep
+    wall_s, cpu_s, duration, n = rep["wall_s"], rep["cpu_s"], rep["duration_s"], rep["scans"]
+    load_before, load_after = rep["load_avg_before"], rep["load_avg_after"]
+    grid = slam.occupancy_grid(budget=10**9)
+    g = slam.pose_graph()
+    report = {
+        **_public(rep),
+        "read_s": read_s,
         "cpus": os.cpu_count(),
         "machine": platform.machine(),
         "python": platform.python_version(),
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "command": "ocslam bench slam " + " ".join(sys.argv[3:] if sys.argv[1:3] == ["bench", "slam"] else sys.argv[1:]),
+        "command": _command(),
         "published": PUBLISHED.get(name.lower(), []),
         "out": str(out),
     }
@@ -232,6 +312,96 @@ def run(args: argparse.Namespace) -> int:
         text = table(headers, rows, title=title, file=buf)
     else:
         text = table(headers, rows, title=title)
-        print(f"keyframes {len(g.nodes)}, loop edges {int(g.is_loop.sum())}, outputs in {out}/")
-    (out / "report.md").write_text(text + "\n")
+        print(
+            f"keyframes {len(g.nodes)}, loop closures accepted {int(g.is_loop.sum())}, rejected {rep['loops_rejected']} "
+            f"{rep['loops_rejected_by']}, outputs in {out}/"
+        )
+    (out / "report.md").write_text("\n".join(inferred_lines(log)) + "\n\n" + text + "\n")
+    return 0
+
+
+#: Targets of issue 11 for the synthetic buildings.
+SYNTH_TARGETS = {"heading_err_max_deg": 0.5, "trans_mean_m": 0.03, "false_loops_accepted": 0}
+
+
+def _run_synthetic(args: argparse.Namespace, cfg: SlamConfig) -> int:
+    from app.ocslam.slam.buildings import BUILDINGS, run_building
+
+    names = [b.strip() for b in args.buildings.split(",") if b.strip()]
+    unknown = [b for b in names if b not in BUILDINGS]
+    if unknown:
+        print(f"ocslam bench slam: unknown building(s) {unknown}; choose from {sorted(BUILDINGS)}", file=sys.stderr)
+        return 2
+    results = []
+    for nm in names:
+        b = BUILDINGS[nm]()
+        if not args.json:
+            print(f"{nm}: {b.description} …", file=sys.stderr, flush=True)
+        r = run_building(b, cfg).as_dict()
+        r["meets_targets"] = bool(
+            r["heading_err_max_deg"] <= SYNTH_TARGETS["heading_err_max_deg"]
+            and r["trans_mean_m"] <= SYNTH_TARGETS["trans_mean_m"]
+            and r["false_loops_accepted"] <= SYNTH_TARGETS["false_loops_accepted"]
+        )
+        results.append(r)
+    report = {
+        "suite": "synthetic",
+        "lidar": "361 beams over 180° (0.5°), 50 m range, 1 cm noise",
+        "targets": SYNTH_TARGETS,
+        "buildings": results,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "command": _command(),
+    }
+    if args.json:
+        print_json(report)
+        return 0
+    headers = ["building", "path (m)", "scans", "rel. trans (m)", "rel. rot (°)", "heading max (°)", "odom heading max (°)",
+               "ATE (m)", "loops acc.", "loops rej.", "false acc. (end / ever)", "wall (s)", "targets"]
+    rows = [[r["name"], f"{r['path_m']:.0f}", r["scans"], r["trans_mean_m"], r["rot_mean_deg"], r["heading_err_max_deg"],
+             f"{r['odom_heading_err_max_deg']:.1f}", r["ate_m"], r["loops_accepted"], r["loops_rejected"],
+             f"{r['false_loops_accepted']} / {r['false_loops_ever']}", f"{r['wall_s']:.0f}", "met" if r["meets_targets"] else "NOT met"]
+            for r in results]
+    table(headers, rows, title="SLAM robustness suite: synthetic buildings (default parameters; truth known)")
+    return 0
+
+
+def _run_perturbed(args: argparse.Namespace, cfg: SlamConfig) -> int:
+    from app.config import PROJECT_ROOT
+    from app.ocslam.slam.perturb import PERTURBATIONS
+
+    data = Path(args.data) if args.data else PROJECT_ROOT.parent / "shared" / "datasets"
+    logs = [x.strip() for x in args.logs.split(",") if x.strip()]
+    perts = [x.strip() for x in args.perturbations.split(",") if x.strip()]
+    bad = [x for x in perts if x not in PERTURBATIONS]
+    if bad:
+        print(f"ocslam bench slam: unknown perturbation(s) {bad}; choose from {sorted(PERTURBATIONS)}", file=sys.stderr)
+        return 2
+    results = []
+    for ln in logs:
+        log_path, rel_path = _find(data / ln)
+        base = read_carmen(log_path)
+        rel = read_relations(rel_path)
+        for pn in perts:
+            log = PERTURBATIONS[pn](base)
+            if not args.json:
+                print(f"{ln} / {pn}: " + "; ".join(inferred_lines(log)), file=sys.stderr, flush=True)
+            rep = _public(run_log(log, rel, cfg, f"{ln}-{pn}", args.limit_seconds, progress=not args.no_progress))
+            rep["log"], rep["perturbation"] = ln, pn
+            results.append(rep)
+    report = {
+        "suite": "perturbed",
+        "limit_seconds": args.limit_seconds,
+        "runs": results,
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "command": _command(),
+    }
+    if args.json:
+        print_json(report)
+        return 0
+    headers = ["log", "perturbation", "relations", "trans abs (m)", "rot abs (°)", "scans", "loops acc.", "loops rej.", "wall (s)"]
+    rows = [[r["log"], r["perturbation"], r.get("relations"), f"{fmt(r.get('trans_mean_m'))} ± {fmt(r.get('trans_std_m'))}",
+             f"{fmt(r.get('rot_mean_deg'))} ± {fmt(r.get('rot_std_deg'))}", r["scans"], r["loop_edges"], r["loops_rejected"], f"{r['wall_s']:.0f}"]
+            for r in results]
+    lim = f", first {args.limit_seconds:g} s of each" if args.limit_seconds else ""
+    table(headers, rows, title=f"SLAM robustness suite: perturbed logs (default parameters{lim})")
     return 0

@@ -7,7 +7,12 @@
   :class:`~app.ocslam.messages.LaserScan` convention). The maximum is ``PARAM robot_front_laser_max``
   / ``laser_front_laser_max`` / ``robot_frontlaser_max`` when present, else the largest reading of
   the log if it repeats (the sensor's saturation value), else 81.0 m.
-- ``PARAM robot_frontlaser_offset`` (metres along the robot's x axis) gives ``T_base_scan``.
+- ``T_base_scan`` from the data: every FLASER line carries the laser pose and the robot pose in the
+  odometry frame, so ``T_base_scan = T_odom_base⁻¹ ∘ T_odom_laser`` (the median over the log, used when the
+  lines agree to a millimetre); else ``PARAM robot_frontlaser_offset`` (metres along the robot's x axis).
+- What was inferred (beams, angular increment, field of view, maximum range and where it came from,
+  the sensor offset and its source, the odometry source, timestamps stepping back) is in
+  :attr:`CarmenLog.inferred`.
 - Odometry at each scan's stamp: interpolated from the ``ODOM`` lines when the log has them, else the
   ``odom_*`` pose inside the ``FLASER`` line. Interpolation is between the ``ODOM`` lines just before and
   just after the scan *in the file*, with the time fraction clamped to ``[0, 1]``: some logs (Intel)
@@ -27,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.ocslam.messages import LaserScan
-from app.ocslam.se2 import Pose2, wrap_angle
+from app.ocslam.se2 import Pose2, between, wrap_angle
 
 
 class CarmenError(ValueError):
@@ -57,6 +62,8 @@ class CarmenLog:
     max_range: float
     params: dict[str, str]
     stamp_strings: list[str]
+    flaser_laser: NDArray[np.float64] | None = None  # (N, 3) the laser pose inside FLASER (odometry frame)
+    inferred: dict | None = None
 
     def __len__(self) -> int:
         return len(self.stamps)
@@ -102,6 +109,7 @@ def read_carmen(path: str | Path) -> CarmenLog:
     stamp_s: list[str] = []
     ranges: list[NDArray[np.float64]] = []
     fodom: list[tuple[float, float, float]] = []
+    flaser: list[tuple[float, float, float]] = []
     prev_odom: list[int] = []  # index of the last ODOM line before each FLASER (-1: none)
     try:
         with _open(path) as fh:
@@ -123,6 +131,7 @@ def read_carmen(path: str | Path) -> CarmenLog:
                         r = np.array(tok[2 : 2 + n], dtype=np.float64)
                         o = 2 + n
                         fodom.append((float(tok[o + 3]), float(tok[o + 4]), float(tok[o + 5])))
+                        flaser.append((float(tok[o]), float(tok[o + 1]), float(tok[o + 2])))
                         stamps.append(float(tok[o + 6]))
                         stamp_s.append(tok[o + 6])
                         ranges.append(r)
@@ -135,16 +144,21 @@ def read_carmen(path: str | Path) -> CarmenLog:
         raise CarmenError(f"{path}: no FLASER lines")
     st = np.array(stamps)
     max_range = None
+    max_src = "default 81 m"
     for k in _MAX_PARAMS:
         if k in params:
             try:
                 max_range = float(params[k])
+                max_src = f"PARAM {k}"
             except ValueError:
                 pass
     if max_range is None:
         allr = np.concatenate(ranges)
         top = float(allr.max())
-        max_range = top if np.count_nonzero(allr >= top - 1e-6) > 1 else 81.0
+        if np.count_nonzero(allr >= top - 1e-6) > 1:
+            max_range, max_src = top, "largest reading (repeats: the sensor's saturation value)"
+        else:
+            max_range = 81.0
     # readings at the maximum (within a centimetre or so) are "no return"
     out_r = []
     for r in ranges:
@@ -156,6 +170,19 @@ def read_carmen(path: str | Path) -> CarmenLog:
     except ValueError:
         offset = 0.0
     fo = np.array(fodom).reshape(-1, 3)
+    fl = np.array(flaser).reshape(-1, 3)
+    T_base_scan, off_src = Pose2(offset, 0.0, 0.0), "PARAM robot_frontlaser_offset" if "robot_frontlaser_offset" in params else "none (0)"
+    rel = between(fo, fl)
+    rel[:, 2] = wrap_angle(rel[:, 2])
+    med = np.median(rel, axis=0)
+    med = np.where(np.abs(med) < 1e-6, 0.0, med)  # rounding of the logged poses
+    spread = np.percentile(np.abs(rel - med), 95, axis=0)
+    if spread[0] < 1e-3 and spread[1] < 1e-3 and spread[2] < 1e-3:
+        if np.any(np.abs(med) > 1e-6) or "robot_frontlaser_offset" not in params:
+            T_base_scan, off_src = Pose2(float(med[0]), float(med[1]), float(med[2])), "FLASER laser pose vs robot pose"
+    counts = np.array([len(r) for r in ranges])
+    n_common = int(np.bincount(counts).argmax())
+    amin, inc = beam_layout(n_common)
     if len(odom_t) >= 1:
         odom = _interpolate_in_file_order(st, np.array(prev_odom), np.array(odom_t), np.array(odom_p))
     else:
@@ -165,10 +192,26 @@ def read_carmen(path: str | Path) -> CarmenLog:
         ranges=out_r,
         odom=odom,
         flaser_odom=fo,
-        T_base_scan=Pose2(offset, 0.0, 0.0),
+        T_base_scan=T_base_scan,
         max_range=float(max_range),
         params=params,
         stamp_strings=stamp_s,
+        flaser_laser=fl,
+        inferred={
+            "scans": int(len(st)),
+            "beams": n_common,
+            "beam_counts": sorted({int(c) for c in counts}),
+            "angle_min_deg": math.degrees(amin),
+            "angle_increment_deg": math.degrees(inc),
+            "fov_deg": math.degrees(inc * (n_common - 1)),
+            "max_range_m": float(max_range),
+            "max_range_source": max_src,
+            "no_return_fraction": float(np.mean(np.concatenate([~np.isfinite(r) for r in out_r]))),
+            "T_base_scan": [T_base_scan.x, T_base_scan.y, T_base_scan.yaw],
+            "T_base_scan_source": off_src,
+            "odometry_source": "ODOM lines (interpolated in file order)" if len(odom_t) else "FLASER odom_* poses",
+            "stamps_stepping_back": int(np.count_nonzero(np.diff(st) < 0)),
+        },
     )
 
 

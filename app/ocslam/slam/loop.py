@@ -186,7 +186,7 @@ class LoopCloser:
                 continue
             self.accepted += 1
             info = scan_information(
-                ref.hessian, float(ref.pose[2]), cfg.match_info_point_sigma_m, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor
+                ref.hessian_line, float(ref.pose[2]), cfg.match_info_point_sigma_m, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor
             )
             out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction, info))
         return out

@@ -184,7 +184,7 @@ class Slam:
             direct = refine(fld, pts, pred, **kw)
             if direct.inlier_fraction >= cfg.match_direct_min_inliers:
                 self.stats["match_direct"] += 1
-                self._match_H = (direct.hessian, float(direct.pose[2]))
+                self._match_H = (direct.hessian_line, float(direct.pose[2]))
                 return direct.pose
         res = correlative_search(
             fld, pts, pred, cfg.match_search_xy_m, cfg.match_search_yaw_rad, cfg.match_yaw_step_rad, cfg.match_min_score
@@ -192,14 +192,14 @@ class Slam:
         if res is None:
             self.stats["match_failed"] += 1
             if direct is not None and direct.inlier_fraction > 0:
-                self._match_H = (direct.hessian, float(direct.pose[2]))
+                self._match_H = (direct.hessian_line, float(direct.pose[2]))
                 return direct.pose
             return pred
         ref = refine(fld, pts, res.pose, **kw)
         self.stats["match_searched"] += 1
         if direct is not None and direct.inlier_fraction > ref.inlier_fraction:
             ref = direct
-        self._match_H = (ref.hessian, float(ref.pose[2]))
+        self._match_H = (ref.hessian_line, float(ref.pose[2]))
         return ref.pose
 
     def _local_field(self) -> MatchField | None:
@@ -320,7 +320,7 @@ class Slam:
             self.correction_count += 1
             self._field = None
             # carry the tracking estimate along with its keyframe
-            k = int(self.traj.anchor.data[-1])
+            k = int(self.traj.anchor.data[-1]) if len(self.traj) else -1
             if k >= 0:
                 self._last_pose = compose(poses[k], self.traj.rel.data[-1])
         return moved

@@ -39,6 +39,10 @@ class RefineResult:
     rms_m: float  # RMS point-to-line distance of the inliers
     hessian: NDArray[np.float64]  # (3, 3) Gauss–Newton information of the scan term (without prior)
     iterations: int
+    #: (3, 3) information of the point-to-line rows only, each weighted by its map point's linearity:
+    #: the directions the map's *surfaces* constrain (a corridor: across, not along). Isolated points
+    #: (sparse returns at long range, whose normal is undefined) add nothing.
+    hessian_line: NDArray[np.float64] | None = None
 
 
 def _rotated_cells(fld: MatchField, pts: NDArray[np.float64], xy: NDArray[np.float64], yaws: NDArray[np.float64]):
@@ -185,6 +189,7 @@ def refine(
     pts = np.asarray(pts, np.float64).reshape(-1, 2)
     x = np.asarray(init, np.float64).copy()
     Hs = np.zeros((3, 3))
+    Hl = np.zeros((3, 3))
     it = 0
     if prior is not None and prior_info is not None:
         prior = np.asarray(prior, np.float64)
@@ -220,6 +225,8 @@ def refine(
         w3 = np.tile(wgt, 3)
         Jw = J * w3[:, None]
         Hs = Jw.T @ J
+        Jl = J[:m] * np.sqrt(wgt * fld.linearity[ks])[:, None]
+        Hl = Jl.T @ Jl
         g = Jw.T @ r
         Ht = Hs.copy()
         if prior is not None and prior_info is not None:
@@ -243,4 +250,4 @@ def refine(
     inl = ok & (en < inlier_m)
     frac = float(inl.sum()) / max(len(pts), 1)
     rms = float(np.sqrt(np.mean(en[inl] ** 2))) if inl.any() else float("inf")
-    return RefineResult(pose=x, inlier_fraction=frac, rms_m=rms, hessian=Hs, iterations=it)
+    return RefineResult(pose=x, inlier_fraction=frac, rms_m=rms, hessian=Hs, iterations=it, hessian_line=Hl)

@@ -166,6 +166,8 @@ class SceneLayers:
         )
         self.graph_edges = s.add_line_segments("/layers/graph/edges", np.zeros((1, 2, 3)), colors=(120, 120, 200), thickness=0.008)
         self.graph_loops = s.add_line_segments("/layers/graph/loops", np.zeros((1, 2, 3)), colors=(255, 0, 200), thickness=0.02)
+        # loop closures the SLAM found but rejected (verification / post-optimisation residual): red, thin
+        self.graph_rejected = s.add_line_segments("/layers/graph/rejected", np.zeros((1, 2, 3)), colors=(230, 40, 40), thickness=0.008)
         # navigation path
         self.nav_path = s.add_line_segments("/layers/nav/path", np.zeros((1, 2, 3)), colors=(0, 200, 80), thickness=0.025)
         # ground truth robot ghost
@@ -391,7 +393,8 @@ class SceneLayers:
                 self.traj_odom.points = polyline_segments(odom, 0.012)
         if self.is_visible("graph"):
             g = p.slam.pose_graph()
-            sig = (len(g.nodes), len(g.edges), p.slam.correction_count)
+            rejected = np.asarray(getattr(g, "rejected", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
+            sig = (len(g.nodes), len(g.edges), p.slam.correction_count, len(rejected))
             if sig != self._graph_sig and len(g.nodes):
                 self._graph_sig = sig
                 nodes3 = np.column_stack([g.nodes[:, :2], np.full(len(g.nodes), 0.02)])
@@ -402,3 +405,7 @@ class SceneLayers:
                     segs = np.stack([nodes3[e[:, 0]], nodes3[e[:, 1]]], axis=1)
                     self.graph_edges.points = _segments_or_empty(segs[~loop])
                     self.graph_loops.points = _segments_or_empty(segs[loop] + np.array([0, 0, 0.01]))
+                rejected = rejected[(rejected >= 0).all(axis=1) & (rejected < len(nodes3)).all(axis=1)]
+                self.graph_rejected.points = _segments_or_empty(
+                    np.stack([nodes3[rejected[:, 0]], nodes3[rejected[:, 1]]], axis=1) + np.array([0, 0, 0.005])
+                )

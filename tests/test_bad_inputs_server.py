@@ -540,6 +540,34 @@ def test_token_cookie_lets_a_browser_page_open_its_websocket(tokened) -> None:
     assert _ws(port, "/", cookie, origin="http://evil.example") == 403  # the Origin check still applies
 
 
+@pytest.mark.slow
+@pytest.mark.browser
+def test_token_url_opens_the_app_in_a_real_browser() -> None:
+    """Chromium opens the printed URL: the cookie it gets lets the page's own websocket in (a button
+    click reaches the server); a second context without the token gets nothing."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from browser import browser_page
+
+    from app.ui.security import create_server
+
+    server, policy = create_server("127.0.0.1", 0, token=TOKEN)
+    clicks: list[int] = []
+    server.gui.add_button("Knock").on_click(lambda ev: clicks.append(1))
+    port = server.get_port()
+    try:
+        with browser_page(f"http://127.0.0.1:{port}/?token={TOKEN}") as (page,):
+            assert "token=" not in page.url
+            page.get_by_role("button", name="Knock").click(timeout=60_000)
+            wait_for(lambda: clicks, what="the click over the cookie-authenticated websocket")
+            other = page.context.browser.new_context()
+            p2 = other.new_page()
+            r = p2.goto(f"http://127.0.0.1:{port}/")
+            assert r.status == 403 and "access token is required" in p2.content()
+            other.close()
+    finally:
+        server.stop()
+
+
 def test_loopback_needs_no_token(app) -> None:
     assert app.token is None and app.url == f"http://127.0.0.1:{app.port}"
     assert _http(app.port, "/").status == 200

@@ -7,6 +7,20 @@ hour on 2 cores with the defaults (see docs/detector.md):
     ocslam train-detector --data datasets/sim --hours 1
 
 Without a dataset at --data (default datasets/sim) it renders one with that recipe first.
+
+One long schedule over many sessions: every epoch's full state (weights, optimizer, learning-rate
+schedule, epoch counter) is copied to --checkpoint (default assets/models/detector-train.pt), and
+
+    ocslam train-detector --resume [--epochs TOTAL] [--hours H]
+
+continues that same run; --hours stops it cleanly at the end of an epoch (the schedule is the run's,
+not refitted to the budget).
+
+The app's inference model is made from a trained float model (static input, int8; needs onnx,
+onnxslim and onnxruntime, no torch):
+
+    ocslam dataset --worlds 6 --per-world 15 --seed 1 --imgsz 320x240 --apartment-images 30 --val-fraction 0 --out datasets/calib
+    ocslam train-detector --optimize assets/models/detector-v3.onnx --calib datasets/calib --out assets/models/detector.onnx
 """
 
 from __future__ import annotations
@@ -41,6 +55,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, help="ONNX output (default: assets/models/detector.onnx; card beside it)")
     p.add_argument("--runs", type=Path, default=None, help="ultralytics run folder (default: runs/detector)")
     p.add_argument("--name", default="train", help="run name inside --runs")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the run saved in --checkpoint (optimizer, LR schedule, epoch counter)")
+    p.add_argument("--checkpoint", type=Path, default=None,
+                   help="resumable checkpoint written every epoch (default: assets/models/detector-train.pt)")
+    p.add_argument("--optimize", type=Path, default=None, metavar="FLOAT_ONNX",
+                   help="no training: make the static-shape int8 inference model from this float model (see --calib)")
+    p.add_argument("--calib", type=Path, default=Path("datasets/calib"),
+                   help="with --optimize: `ocslam dataset` folder of calibration renders (training worlds)")
+    p.add_argument("--calib-images", type=int, default=120, help="with --optimize: calibration images used")
+    p.add_argument("--static", default="224x192", help="with --optimize: static input W×H (the app's 320×240 → 224×192)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
 
     from app.training import TrainingUnavailable, TrainOptions, train_detector
 
+    if args.optimize is not None:
+        return _optimize(args)
     opts = TrainOptions(
         data=args.data,
         model=args.model,
@@ -62,7 +88,10 @@ def run(args: argparse.Namespace) -> int:
         close_mosaic=args.close_mosaic,
         name=args.name,
         init_weights=args.init_weights,
+        resume=args.resume,
     )
+    if args.checkpoint is not None:
+        opts.checkpoint = args.checkpoint
     if args.out is not None:
         opts.out_model = args.out
     if args.runs is not None:
@@ -82,10 +111,45 @@ def run(args: argparse.Namespace) -> int:
     except TrainingUnavailable as e:
         print(f"ocslam train-detector: {e}", file=sys.stderr)
         return 2
+    except (FileNotFoundError, ValueError) as e:
+        print(f"ocslam: error: {e}", file=sys.stderr)
+        return 2
     v = res.card["validation"]
     print(
         f"done: {res.model_path} ({res.card['training']['epochs_run']} epochs, "
         f"{res.card['training']['training_time_h']:.2f} h); val precision {v['precision']}, recall {v['recall']}, "
         f"mAP50 {v['map50']}, mAP50-95 {v['map50_95']}"
     )
+    return 0
+
+
+def _optimize(args: argparse.Namespace) -> int:
+    import sys
+
+    from app.training import optimize_for_inference
+
+    try:
+        w, h = (int(v) for v in str(args.static).lower().split("x"))
+    except ValueError:
+        print(f"ocslam: error: --static must be W×H, e.g. 224x192, got {args.static!r}", file=sys.stderr)
+        return 2
+    if w % 32 or h % 32:
+        print(f"ocslam: error: --static {w}x{h}: both sides must be multiples of 32", file=sys.stderr)
+        return 2
+    if not args.optimize.is_file():
+        print(f"ocslam: error: no model at {args.optimize}", file=sys.stderr)
+        return 2
+    try:
+        import onnx  # noqa: F401
+        import onnxslim  # noqa: F401
+    except ImportError as e:
+        print(f"ocslam: error: --optimize needs onnx and onnxslim (pip install onnx onnxslim, or the [train] extra): {e}",
+              file=sys.stderr)
+        return 2
+    out = args.out or Path("assets/models/detector.onnx")
+    try:
+        optimize_for_inference(args.optimize, out, args.calib, w, h, calib_images=args.calib_images)
+    except (FileNotFoundError, ValueError) as e:
+        print(f"ocslam: error: {e}", file=sys.stderr)
+        return 2
     return 0

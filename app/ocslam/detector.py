@@ -94,29 +94,39 @@ def input_shape_for(width: int, height: int, input_width: int, stride: int = STR
     return input_width, int(math.ceil(h / stride) * stride)
 
 
+def letterbox_geometry(width: int, height: int, input_width: int, input_height: int) -> tuple[Letterbox, int, int]:
+    """How a ``width × height`` image fits ``input_width × input_height`` keeping its aspect (centred
+    padding, as ultralytics does): the :class:`Letterbox` and the resized content size ``(nw, nh)``."""
+    r = min(input_width / width, input_height / height)
+    nw, nh = int(round(width * r)), int(round(height * r))
+    dw, dh = (input_width - nw) / 2.0, (input_height - nh) / 2.0
+    top, left = int(round(dh - 0.1)), int(round(dw - 0.1))
+    return Letterbox(r, float(left), float(top), input_width, input_height), nw, nh
+
+
 def letterbox(
-    rgb: NDArray[np.uint8], input_width: int, input_height: int
+    rgb: NDArray[np.uint8], input_width: int, input_height: int, out: NDArray[np.float32] | None = None
 ) -> tuple[NDArray[np.float32], Letterbox]:
     """Downscale ``(H, W, 3)`` uint8 RGB to fit ``input_width × input_height`` keeping its aspect, pad
     the rest with grey 114 (centred, as ultralytics does), and return the ``(1, 3, h, w)`` float32 NCHW
-    tensor in [0, 1] with the :class:`Letterbox` that maps boxes back."""
+    tensor in [0, 1] with the :class:`Letterbox` that maps boxes back.
+
+    ``out``: a ``(1, 3, input_height, input_width)`` float32 buffer whose padding already holds
+    114/255 for this geometry (as left by an earlier call on an image of the same size); only the
+    content is written (no allocation). Without it a new tensor is made."""
     h, w = rgb.shape[:2]
-    r = min(input_width / w, input_height / h)
-    nw, nh = int(round(w * r)), int(round(h * r))
+    lb, nw, nh = letterbox_geometry(w, h, input_width, input_height)
     if (nw, nh) != (w, h):
-        interp = cv2.INTER_AREA if r < 1.0 else cv2.INTER_LINEAR
+        interp = cv2.INTER_AREA if lb.scale < 1.0 else cv2.INTER_LINEAR
         resized = cv2.resize(rgb, (nw, nh), interpolation=interp)
     else:
         resized = rgb
-    dw, dh = (input_width - nw) / 2.0, (input_height - nh) / 2.0
-    top, bottom = int(round(dh - 0.1)), int(round(dh + 0.1))
-    left, right = int(round(dw - 0.1)), int(round(dw + 0.1))
-    if top or bottom or left or right:
-        resized = cv2.copyMakeBorder(
-            resized, top, bottom, left, right, cv2.BORDER_CONSTANT, value=(PAD_VALUE, PAD_VALUE, PAD_VALUE)
-        )
-    blob = resized.astype(np.float32).transpose(2, 0, 1)[None] * np.float32(1.0 / 255.0)
-    return np.ascontiguousarray(blob), Letterbox(r, float(left), float(top), input_width, input_height)
+    if out is None:
+        out = np.full((1, 3, input_height, input_width), np.float32(PAD_VALUE / 255.0), np.float32)
+    top, left = int(lb.pad_y), int(lb.pad_x)
+    # HWC uint8 → CHW float32 in [0, 1], straight into the padded tensor.
+    np.multiply(resized.transpose(2, 0, 1), np.float32(1.0 / 255.0), out=out[0, :, top : top + nh, left : left + nw])
+    return out, lb
 
 
 def decode_output(
@@ -145,14 +155,14 @@ def decode_output(
     if out.ndim != 2 or out.shape[0] != 4 + num_classes:
         raise DetectorError(f"expected a [1, {4 + num_classes}, N] output, got {np.asarray(output).shape}")
     scores_all = out[4:]
-    cls = np.argmax(scores_all, axis=0)
-    score = scores_all[cls, np.arange(out.shape[1])]
-    keep = np.isfinite(score) & (score >= confidence)
-    if not np.any(keep):
+    best = scores_all.max(axis=0)  # NaN propagates and fails the threshold below
+    keep = np.flatnonzero(best >= confidence)
+    if keep.size == 0:
         return np.zeros((0, 4)), np.zeros(0), np.zeros(0, dtype=np.int64)
-    cx, cy, bw, bh = (out[i, keep].astype(np.float64) for i in range(4))
-    score = score[keep].astype(np.float64)
-    cls = cls[keep].astype(np.int64)
+    sel = out[:, keep]  # only the anchors above the threshold are decoded
+    cls = np.argmax(sel[4:], axis=0).astype(np.int64)
+    score = best[keep].astype(np.float64)
+    cx, cy, bw, bh = (sel[i].astype(np.float64) for i in range(4))
     x1 = (cx - bw / 2.0 - lb.pad_x) / lb.scale
     y1 = (cy - bh / 2.0 - lb.pad_y) / lb.scale
     x2 = (cx + bw / 2.0 - lb.pad_x) / lb.scale
@@ -260,6 +270,16 @@ def verify_model_hash(model: Path) -> str | None:
     return actual
 
 
+def session_config_entries(cfg: DetectorConfig) -> dict[str, str]:
+    """onnxruntime session config entries from the config: intra-op spin-waiting (``cfg.spin``; off by
+    default: on the app's 2 shared cores a spinning thread takes the CPU the loop needs, measured in
+    docs/detector.md) and flushing denormals to zero (``cfg.denormal_as_zero``)."""
+    return {
+        "session.intra_op.allow_spinning": "1" if getattr(cfg, "spin", False) else "0",
+        "session.set_denormal_as_zero": "1" if getattr(cfg, "denormal_as_zero", False) else "0",
+    }
+
+
 def _parse_metadata(meta: dict[str, str]) -> tuple[tuple[str, ...] | None, int | None]:
     """Class names and training input width from ultralytics' ONNX metadata (``names``, ``imgsz``)."""
     names: tuple[str, ...] | None = None
@@ -309,6 +329,8 @@ class Detector:
         opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
         opts.log_severity_level = 3
+        for key, value in session_config_entries(cfg).items():
+            opts.add_session_config_entry(key, value)
         try:
             self.session = ort.InferenceSession(str(path), sess_options=opts, providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises its own exception types for bad protobufs
@@ -342,6 +364,8 @@ class Detector:
                 raise DetectorError(f"detector.input_size must be a multiple of {STRIDE}, got {self._width}")
         self.trained_width = trained_width
         self.num_classes = len(self.class_names)
+        self._blob: NDArray[np.float32] | None = None
+        self._blob_key: tuple[int, int] | None = None
         # One dry run: a file that loads but computes the wrong thing fails here, not in the loop.
         probe_w, probe_h = self.input_size_for(640, 480)
         try:
@@ -368,10 +392,18 @@ class Detector:
         return input_shape_for(width, height, self._width)
 
     def infer(self, rgb: NDArray[np.uint8]) -> tuple[NDArray[np.float32], Letterbox]:
-        """Raw network output ``(1, 4 + C, N)`` for an ``(H, W, 3)`` RGB image, and its letterbox."""
+        """Raw network output ``(1, 4 + C, N)`` for an ``(H, W, 3)`` RGB image, and its letterbox.
+
+        The input tensor is kept between calls (its grey padding is written once per image size), so a
+        stream of same-size camera images allocates nothing for preprocessing. Not thread-safe: one
+        Detector per thread."""
         rgb = _as_rgb(rgb)
-        w_in, h_in = self.input_size_for(rgb.shape[1], rgb.shape[0])
-        blob, lb = letterbox(rgb, w_in, h_in)
+        key = (rgb.shape[1], rgb.shape[0])
+        if self._blob_key != key:
+            w_in, h_in = self.input_size_for(*key)
+            self._blob = np.full((1, 3, h_in, w_in), np.float32(PAD_VALUE / 255.0), np.float32)
+            self._blob_key = key
+        blob, lb = letterbox(rgb, self._blob.shape[3], self._blob.shape[2], out=self._blob)
         out = self.session.run(None, {self._input_name: blob})[0]
         return out, lb
 

@@ -132,6 +132,11 @@ class LidarConfig:
     range_max_m: float = param(3.5, min=0.5, max=100.0, unit="m", help="maximum range (no return → inf)")
     rate_hz: float = param(5.0, min=0.5, max=100.0, unit="Hz", help="scan rate")
     noise_std_m: float = param(0.01, min=0.0, max=0.5, step=0.001, unit="m", help="Gaussian range noise σ")
+    caster: str = param(
+        "planar", choices=("planar", "pybullet"),
+        help="planar: rays against the collision shapes' exact cross-section at the LIDAR height (fast);"
+             " pybullet: rayTestBatch",
+    )
 
 
 @dataclass

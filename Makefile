@@ -9,7 +9,7 @@ PORT ?= 8080
 ARGS ?=
 PYTEST_ARGS ?=
 
-.PHONY: setup run test test-fast bench train browser strace lint clean help
+.PHONY: setup run test test-fast bench train browser strace egl lint clean help
 
 help:
 	@echo "make run    set up .venv and start the web app on http://$(HOST):$(PORT)"
@@ -30,7 +30,7 @@ $(VENV)/.installed-test: pyproject.toml $(VENV)/.installed
 	$(PIP) install --quiet -e ".[test]"
 	@touch $@
 
-setup: $(VENV)/.installed
+setup: $(VENV)/.installed egl
 
 run: setup
 	@echo "OCSLAM: open http://$(HOST):$(PORT) in your browser (Ctrl-C stops)"
@@ -62,10 +62,25 @@ strace:
 	  echo "      (the no-outbound-traffic test will be skipped)."; \
 	fi
 
-test: $(VENV)/.installed-test browser strace
+# Mesa's EGL + llvmpipe for pybullet's EGL renderer plugin (the camera renders faster than with
+# TinyRenderer, no GPU or display needed); without them the app falls back to TinyRenderer.
+EGL_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+egl:
+	@if ldconfig -p 2>/dev/null | grep -q libEGL_mesa.so.0; then \
+	  true; \
+	elif [ "$$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "installing Mesa's EGL for the camera renderer ($(EGL_PACKAGES))"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(EGL_PACKAGES) >/dev/null) \
+	    || echo "WARNING: apt-get install $(EGL_PACKAGES) failed; the camera will use TinyRenderer"; \
+	else \
+	  echo "NOTE: Mesa's EGL is not installed and this is not root: run 'sudo apt-get install $(EGL_PACKAGES)'"; \
+	  echo "      (the camera falls back to pybullet's slower TinyRenderer without it)."; \
+	fi
+
+test: $(VENV)/.installed-test browser strace egl
 	$(PY) -m pytest $(PYTEST_ARGS)
 
-test-fast: $(VENV)/.installed-test
+test-fast: $(VENV)/.installed-test egl
 	$(PY) -m pytest -m "not slow and not browser" $(PYTEST_ARGS)
 
 bench: setup

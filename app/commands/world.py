@@ -2,6 +2,7 @@
 
 Examples:
     ocslam world random --seed 7 --out worlds/random_7.yaml
+    ocslam world random --family corridor --seed 7 --out worlds/corridor_7.yaml
     ocslam world validate assets/worlds/apartment.yaml
     ocslam world models
 """
@@ -19,6 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("--seed", type=int, required=True, help="random seed (the same seed gives the same world)")
     r.add_argument("--out", type=Path, required=True, help="output YAML file")
     r.add_argument("--rooms", type=int, default=None, help="number of rooms (default: 3–5 at random)")
+    r.add_argument("--family", choices=("rooms", "corridor", "lshape", "openplan"), default="rooms",
+                   help="layout family: rooms (a rectangle split into rooms), corridor (+ offices), lshape (an L-shaped "
+                        "flat), openplan (app/world_layouts.py)")
     v = sub.add_parser("validate", help="load and check a world file (exit 2 with the offending entry)")
     v.add_argument("file", type=Path, nargs="+")
     sub.add_parser("models", help="list the model catalogue (name, class, size, legged)")
@@ -29,7 +33,12 @@ def run(args: argparse.Namespace) -> int:
 
     cmd = getattr(args, "world_command", None)
     if cmd == "random":
-        world = random_world(args.seed, n_rooms=args.rooms)
+        if getattr(args, "family", "rooms") != "rooms":
+            from app.world_layouts import generate
+
+            world = generate(args.family, args.seed)
+        else:
+            world = random_world(args.seed, n_rooms=args.rooms)
         dump_world(world, args.out)
         counts = class_counts(world)
         print(

@@ -234,3 +234,231 @@ def format_table(rows: Mapping[str, ObjectReport | Mapping[str, Any]]) -> str:
     for b in body:
         lines.append(" | ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(b, widths))))
     return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------------------------
+# Why was an object missed? (issue 9, item 5)
+# ----------------------------------------------------------------------------------------------
+
+#: causes of a false negative, in pipeline order (the first that applies is reported)
+MISS_CAUSES: tuple[str, ...] = (
+    "never_in_view",  # no camera pose of the run had it in the field of view, unoccluded, in range
+    "never_detected",  # in view, but no box of its class covered its image columns
+    "no_lidar_support",  # detected, but no LIDAR return on it inside any such box
+    "merged",  # a shown object of another true object (or a false positive) lies on it
+    "below_threshold",  # a tracked object of its class is there, with presence below the threshold
+    "lost",  # seen, detected and supported, yet no tracked object of its class near it at the end
+)
+
+
+def _view_samples(footprint: np.ndarray, shrink: float = 0.6, n: int = 8) -> np.ndarray:
+    """``(S, 2)`` points an observer must see of a footprint: its centroid and ``n`` points of its
+    boundary pulled ``shrink`` of the way towards the centroid (so touching neighbours do not hide them)."""
+    poly = _polygon(footprint)
+    if poly is None:
+        fp = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
+        return fp.mean(axis=0, keepdims=True) if len(fp) else np.zeros((0, 2))
+    c = np.array(poly.centroid.coords[0])
+    ring = poly.exterior
+    pts = np.array([ring.interpolate(t, normalized=True).coords[0] for t in np.linspace(0, 1, n, endpoint=False)])
+    return np.vstack([c, c + shrink * (pts - c)])
+
+
+def in_view_matrix(
+    T_map_camera: np.ndarray,
+    footprints: Sequence[np.ndarray],
+    occluders: Sequence[Any],
+    hfov_rad: float,
+    max_range_m: float = 4.0,
+    min_range_m: float = 0.2,
+    min_visible: float = 0.4,
+) -> np.ndarray:
+    """Which objects each camera pose sees: ``(P, N)`` bool.
+
+    ``T_map_camera``: ``(P, 3)`` planar camera poses ``[x, y, yaw]`` (yaw = optical axis) in the map
+    frame; ``footprints``: ``N`` polygons ``(K, 2)`` in the map frame; ``occluders[j]``: a shapely
+    geometry that hides object ``j`` (walls, and the furniture tall enough to hide it; it must not
+    contain object ``j`` itself) or ``None``. An object is in view when at least ``min_visible`` of its
+    sample points (:func:`_view_samples`) lie inside the horizontal field of view, between
+    ``min_range_m`` and ``max_range_m``, with a free line of sight. A planar test: heights only enter
+    through the caller's choice of occluders.
+    """
+    poses = np.asarray(T_map_camera, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros((len(poses), len(footprints)), dtype=bool)
+    if not len(poses):
+        return out
+    for j, fp in enumerate(footprints):
+        s = _view_samples(fp)
+        if not len(s):
+            continue
+        d = s[None, :, :] - poses[:, None, :2]  # (P, S, 2)
+        rng = np.hypot(d[..., 0], d[..., 1])
+        bearing = np.arctan2(d[..., 1], d[..., 0]) - poses[:, None, 2]
+        bearing = (bearing + np.pi) % (2 * np.pi) - np.pi
+        ok = (np.abs(bearing) <= hfov_rad / 2) & (rng >= min_range_m) & (rng <= max_range_m)
+        occ = occluders[j] if j < len(occluders) else None
+        if occ is not None and not occ.is_empty and ok.any():
+            pi, si = np.nonzero(ok)
+            lines = shapely.linestrings(np.stack([poses[pi, :2], s[si]], axis=1))
+            shapely.prepare(occ)
+            ok[pi, si] = ~shapely.intersects(occ, lines)
+        out[:, j] = ok.mean(axis=1) >= min_visible - 1e-9
+    return out
+
+
+def image_columns(T_map_camera: np.ndarray, footprint: np.ndarray, fx: float, cx: float, width: int) -> tuple[float, float] | None:
+    """The image-column interval ``(u0, u1)`` that a footprint spans for a planar camera pose
+    ``[x, y, yaw]`` (pinhole, optical axis along ``yaw``, columns growing to the right), clipped to
+    ``[0, width]``; ``None`` when it lies entirely behind the camera or outside the image."""
+    x, y, yaw = (float(v) for v in np.asarray(T_map_camera).reshape(3))
+    fp = np.asarray(footprint, dtype=np.float64).reshape(-1, 2) - (x, y)
+    c, s = np.cos(yaw), np.sin(yaw)
+    fwd = c * fp[:, 0] + s * fp[:, 1]
+    left = -s * fp[:, 0] + c * fp[:, 1]
+    m = fwd > 0.05
+    if not m.any():
+        return None
+    u = cx - fx * left[m] / fwd[m]
+    if (~m).any():  # part behind the camera: the footprint reaches the image's edge on its side
+        u = np.r_[u, 0.0 if (left[~m] > 0).any() else width]
+        if (left[~m] > 0).any() and (left[~m] < 0).any():
+            u = np.r_[u, 0.0, float(width)]
+    u0, u1 = float(np.clip(u.min(), 0, width)), float(np.clip(u.max(), 0, width))
+    return (u0, u1) if u1 - u0 > 0 else None
+
+
+def point_columns(T_map_camera: np.ndarray, points: np.ndarray, fx: float, cx: float) -> np.ndarray:
+    """``(M,)`` image columns of ``(M, 2)`` map points for a planar camera pose ``[x, y, yaw]``
+    (``nan`` for points behind the camera)."""
+    x, y, yaw = (float(v) for v in np.asarray(T_map_camera).reshape(3))
+    d = np.asarray(points, dtype=np.float64).reshape(-1, 2) - (x, y)
+    c, s = np.cos(yaw), np.sin(yaw)
+    fwd = c * d[:, 0] + s * d[:, 1]
+    left = -s * d[:, 0] + c * d[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(fwd > 0.05, cx - fx * left / fwd, np.nan)
+
+
+def box_covers(cols: tuple[float, float] | None, box_x1: float, box_x2: float, min_overlap: float = 0.5) -> bool:
+    """A box ``[x1, x2]`` covers an object's columns when their overlap is at least ``min_overlap`` of
+    the narrower of the two."""
+    if cols is None:
+        return False
+    inter = min(cols[1], box_x2) - max(cols[0], box_x1)
+    narrow = max(min(cols[1] - cols[0], box_x2 - box_x1), 1e-6)
+    return inter >= min_overlap * narrow
+
+
+@dataclass
+class ObservationLog:
+    """Per true object, how often a run saw it, detected it and had LIDAR on it (the evidence behind
+    :func:`explain_misses`). Filled frame by frame with :meth:`add_frame`; all in the map frame."""
+
+    n: int
+    in_view: np.ndarray = field(default=None)  # type: ignore[assignment]
+    detected: np.ndarray = field(default=None)  # type: ignore[assignment]
+    lidar: np.ndarray = field(default=None)  # type: ignore[assignment]
+    frames: int = 0
+
+    def __post_init__(self) -> None:
+        for k in ("in_view", "detected", "lidar"):
+            if getattr(self, k) is None:
+                setattr(self, k, np.zeros(self.n, dtype=np.int64))
+
+    def add_frame(
+        self,
+        T_map_camera: np.ndarray,
+        truth: Sequence[GroundTruthObject],
+        in_view: np.ndarray,
+        boxes: Sequence[tuple[str, float, float]],
+        fx: float,
+        cx: float,
+        width: int,
+        scan_points_map: np.ndarray | None = None,
+        support_m: float = 0.06,
+    ) -> None:
+        """One camera frame: ``in_view`` ``(N,)`` bool (a row of :func:`in_view_matrix`), ``boxes``
+        ``[(class name, x1, x2)]`` in pixel columns, ``scan_points_map`` ``(M, 2)`` the synced scan's
+        returns in the map frame (true pose). An object is *detected* when a box of its class covers
+        its columns (:func:`box_covers`); it has *LIDAR support* when one of those boxes also holds a
+        return within ``support_m`` of its footprint."""
+        self.frames += 1
+        iv = np.asarray(in_view, dtype=bool).reshape(-1)
+        self.in_view += iv
+        pts = np.zeros((0, 2)) if scan_points_map is None else np.asarray(scan_points_map, dtype=np.float64).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        for j in np.nonzero(iv)[0]:
+            t = truth[j]
+            cols = image_columns(T_map_camera, t.footprint, fx, cx, width)
+            hit = [(x1, x2) for lab, x1, x2 in boxes if lab == t.label and box_covers(cols, x1, x2)]
+            if not hit:
+                continue
+            self.detected[j] += 1
+            poly = _polygon(t.footprint)
+            if poly is None or not len(pts):
+                continue
+            near = shapely.dwithin(poly, shapely.points(pts), support_m)
+            if not near.any():
+                continue
+            u = point_columns(T_map_camera, pts[near], fx, cx)
+            if any(((u >= x1) & (u <= x2)).any() for x1, x2 in hit):
+                self.lidar[j] += 1
+
+
+def explain_misses(
+    report: ObjectReport,
+    truth: Sequence[GroundTruthObject],
+    tracked: Sequence[TrackedObject],
+    log: ObservationLog | None,
+    presence_threshold: float = 0.8,
+    match_radius_m: float = 0.5,
+    touch_m: float = 0.15,
+) -> dict[str, int]:
+    """Give every false negative of ``report`` a cause (:data:`MISS_CAUSES`), in place: each missed
+    truth row gets ``cause`` and ``miss_detail``. ``tracked`` is the whole object map, below-threshold
+    objects included; ``log`` the run's :class:`ObservationLog` (``None``: only the map-side causes
+    ``merged``/``below_threshold``/``lost`` can be told apart). Returns the count per cause."""
+    counts = {c: 0 for c in MISS_CAUSES}
+    truth_rows = [r for r in report.rows if r.get("kind") == "truth"]
+    shown_ids = {o.id for o in tracked if o.presence >= presence_threshold}
+    owner: dict[int, str] = {}  # object id → what it stands for (matched truth name or "false positive")
+    for r in report.rows:
+        if r.get("object_id") is not None:
+            owner[int(r["object_id"])] = r.get("name") or r.get("class") if r.get("kind") == "truth" else f"a false {r.get('class')}"
+    for j, (t, row) in enumerate(zip(truth, truth_rows)):
+        if row.get("matched"):
+            continue
+        poly = _polygon(t.footprint)
+        txy = np.array([t.pose.x, t.pose.y])
+        cause, detail = "lost", ""
+        if log is not None and log.in_view[j] == 0:
+            cause = "never_in_view"
+        elif log is not None and log.detected[j] == 0:
+            cause, detail = "never_detected", f"in view in {int(log.in_view[j])} frames"
+        elif log is not None and log.lidar[j] == 0:
+            cause, detail = "no_lidar_support", f"detected in {int(log.detected[j])} frames"
+        else:
+            on_it = []
+            for o in tracked:
+                if o.id not in shown_ids:
+                    continue
+                pt = Point(o.pose.x, o.pose.y)
+                near = poly is not None and poly.distance(pt) <= touch_m
+                ofp = _polygon(o.footprint) if o.footprint is not None else None
+                if not near and ofp is not None and poly is not None and poly.area > 0:
+                    near = ofp.intersection(poly).area >= 0.3 * poly.area
+                if near:
+                    on_it.append(o)
+            same = [o for o in tracked if o.label == t.label and o.id not in shown_ids and (
+                float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])) <= match_radius_m
+                or (poly is not None and poly.covers(Point(o.pose.x, o.pose.y))))]
+            if on_it:
+                o = min(on_it, key=lambda o: float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])))
+                cause, detail = "merged", f"into {o.label} #{o.id} ({owner.get(o.id, 'unmatched')})"
+            elif same:
+                o = max(same, key=lambda o: o.presence)
+                cause, detail = "below_threshold", f"{o.label} #{o.id} at presence {o.presence:.2f}"
+        counts[cause] += 1
+        row["cause"] = cause
+        row["miss_detail"] = detail
+    return counts

@@ -61,6 +61,23 @@ OVERLAP_TOL_M = 0.01
 #: heights below which a floor-level opening lets the robot through (the Burger is 0.192 m tall)
 ROBOT_HEIGHT_M = 0.2
 
+# Limits, checked before anything heavy (the simulator's memory and time grow with these)
+#: walls in a world
+MAX_WALLS = 500
+#: objects and obstacles together
+MAX_ENTITIES = 500
+#: openings in one wall
+MAX_OPENINGS = 50
+#: named routes, and waypoints in one route
+MAX_ROUTES = 50
+MAX_WAYPOINTS = 2000
+#: every coordinate (walls, obstacles, objects, start, waypoints) lies within ±MAX_COORD_M
+MAX_COORD_M = 500.0
+#: every size (wall thickness/height, box sides, cylinder diameter/height, scaled models, lifts)
+MAX_SIZE_M = 50.0
+#: world files larger than this are refused before they are parsed
+MAX_FILE_BYTES = 8 * 2**20
+
 
 class WorldError(ValueError):
     """A world file is malformed or inconsistent. The message names the offending entry."""
@@ -300,10 +317,13 @@ _OBJECT_KEYS = {"class", "model", "x", "y", "yaw", "scale", "color", "name"}
 _START_KEYS = {"x", "y", "yaw"}
 
 
-def _num(v: Any, where: str, key: str, *, positive: bool = False, nonneg: bool = False) -> float:
+def _num(v: Any, where: str, key: str, *, positive: bool = False, nonneg: bool = False, limit: float | None = None) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
         raise WorldError(f"{where}: '{key}' must be a finite number, got {v!r}")
     f = float(v)
+    if limit is not None and abs(f) > limit:
+        what = f"coordinates are limited to ±{limit:g} m" if limit >= MAX_COORD_M else f"sizes are limited to {limit:g} m"
+        raise WorldError(f"{where}: '{key}' is {v!r}; {what}")
     if positive and f <= 0:
         raise WorldError(f"{where}: '{key}' must be > 0, got {v!r}")
     if nonneg and f < 0:
@@ -314,7 +334,7 @@ def _num(v: Any, where: str, key: str, *, positive: bool = False, nonneg: bool =
 def _xy(v: Any, where: str, key: str) -> tuple[float, float]:
     if not isinstance(v, (list, tuple)) or len(v) != 2:
         raise WorldError(f"{where}: '{key}' must be [x, y], got {v!r}")
-    return (_num(v[0], where, key), _num(v[1], where, key))
+    return (_num(v[0], where, key, limit=MAX_COORD_M), _num(v[1], where, key, limit=MAX_COORD_M))
 
 
 def _mapping(v: Any, where: str, allowed: set[str], required: Sequence[str] = ()) -> dict:
@@ -346,9 +366,44 @@ def _list(v: Any, where: str) -> list:
     return v
 
 
+def _model_scale(model: str, v: Any, where: str) -> float:
+    """A model's ``scale``: > 0, and the scaled model no larger than :data:`MAX_SIZE_M`."""
+    f = _num(v, where, "scale", positive=True)
+    fp = model_footprint(model, 1.0)
+    extent = max(float(np.ptp(fp[:, 0])), float(np.ptp(fp[:, 1])), model_z_range(model, 1.0)[1], 1e-9)
+    if f * extent > MAX_SIZE_M:
+        raise WorldError(f"{where}: 'scale' {v!r} makes {model!r} {f * extent:.1f} m large; sizes are limited to {MAX_SIZE_M:g} m")
+    return f
+
+
+def check_world_limits(d: dict) -> None:
+    """Counts of a parsed world mapping against the limits (:data:`MAX_WALLS`, :data:`MAX_ENTITIES`,
+    :data:`MAX_ROUTES`, :data:`MAX_WAYPOINTS`), before anything is built from it. ``WorldError`` otherwise."""
+    n: dict[str, int] = {}
+    for key in ("walls", "obstacles", "objects"):
+        v = d.get(key)
+        n[key] = len(v) if isinstance(v, list) else 0
+    if n["walls"] > MAX_WALLS:
+        raise WorldError(f"walls: {n['walls']} walls; a world may have at most {MAX_WALLS}")
+    if n["obstacles"] + n["objects"] > MAX_ENTITIES:
+        raise WorldError(f"{n['objects']} objects and {n['obstacles']} obstacles; a world may have at most "
+                         f"{MAX_ENTITIES} objects and obstacles together")
+    for i, w in enumerate(d.get("walls") or []):
+        if isinstance(w, dict) and isinstance(w.get("openings"), list) and len(w["openings"]) > MAX_OPENINGS:
+            raise WorldError(f"walls[{i}].openings: {len(w['openings'])} openings; a wall may have at most {MAX_OPENINGS}")
+    routes = d.get("routes")
+    if isinstance(routes, dict):
+        if len(routes) > MAX_ROUTES:
+            raise WorldError(f"routes: {len(routes)} routes; a world may have at most {MAX_ROUTES}")
+        for name, pts in routes.items():
+            if isinstance(pts, list) and len(pts) > MAX_WAYPOINTS:
+                raise WorldError(f"routes[{name!r}]: {len(pts)} waypoints; a route may have at most {MAX_WAYPOINTS}")
+
+
 def world_from_dict(data: Any, source: str = "world") -> World:
     """Build (but do not validate the geometry of) a :class:`World` from parsed YAML."""
     d = _mapping(data, source, _TOP_KEYS, required=("walls", "start"))
+    check_world_limits(d)
     walls = []
     for i, wd in enumerate(_list(d.get("walls"), f"{source}: walls")):
         where = f"walls[{i}]"
@@ -363,10 +418,10 @@ def world_from_dict(data: Any, source: str = "world") -> World:
             default_bottom = 0.9 if kind == "window" else 0.0
             openings.append(
                 Opening(
-                    start=_num(od["start"], ow, "start"),
-                    end=_num(od["end"], ow, "end"),
-                    bottom=_num(od.get("bottom", default_bottom), ow, "bottom", nonneg=True),
-                    top=_num(od.get("top", 2.1), ow, "top", positive=True),
+                    start=_num(od["start"], ow, "start", limit=2 * MAX_COORD_M),
+                    end=_num(od["end"], ow, "end", limit=2 * MAX_COORD_M),
+                    bottom=_num(od.get("bottom", default_bottom), ow, "bottom", nonneg=True, limit=MAX_SIZE_M),
+                    top=_num(od.get("top", 2.1), ow, "top", positive=True, limit=MAX_SIZE_M),
                     kind=kind,
                 )
             )
@@ -374,8 +429,8 @@ def world_from_dict(data: Any, source: str = "world") -> World:
             Wall(
                 start=_xy(wd["from"], where, "from"),
                 end=_xy(wd["to"], where, "to"),
-                thickness=_num(wd.get("thickness", 0.15), where, "thickness", positive=True),
-                height=_num(wd.get("height", 2.4), where, "height", positive=True),
+                thickness=_num(wd.get("thickness", 0.15), where, "thickness", positive=True, limit=MAX_SIZE_M),
+                height=_num(wd.get("height", 2.4), where, "height", positive=True, limit=MAX_SIZE_M),
                 openings=tuple(openings),
                 color=_color(wd.get("color"), where),
                 name=str(wd.get("name", "")),
@@ -395,13 +450,13 @@ def world_from_dict(data: Any, source: str = "world") -> World:
             sz = od["size"]
             if not isinstance(sz, (list, tuple)) or len(sz) != 3:
                 raise WorldError(f"{where}: 'size' must be [sx, sy, sz], got {sz!r}")
-            kw["size"] = tuple(_num(v, where, "size", positive=True) for v in sz)
+            kw["size"] = tuple(_num(v, where, "size", positive=True, limit=MAX_SIZE_M) for v in sz)
         elif shape == "cylinder":
             for k in ("radius", "height"):
                 if k not in od:
                     raise WorldError(f"{where}: missing field '{k}' for a cylinder")
-            kw["radius"] = _num(od["radius"], where, "radius", positive=True)
-            kw["height"] = _num(od["height"], where, "height", positive=True)
+            kw["radius"] = _num(od["radius"], where, "radius", positive=True, limit=MAX_SIZE_M / 2)
+            kw["height"] = _num(od["height"], where, "height", positive=True, limit=MAX_SIZE_M)
         else:
             if "model" not in od:
                 raise WorldError(f"{where}: missing field 'model' for shape 'model'")
@@ -413,14 +468,14 @@ def world_from_dict(data: Any, source: str = "world") -> World:
                     f"{where}: model {model!r} is of class {MODELS[model].label!r}; put classified models under 'objects'"
                 )
             kw["model"] = model
-            kw["scale"] = _num(od.get("scale", 1.0), where, "scale", positive=True)
+            kw["scale"] = _model_scale(model, od.get("scale", 1.0), where)
         obstacles.append(
             Obstacle(
                 shape=shape,
-                x=_num(od["x"], where, "x"),
-                y=_num(od["y"], where, "y"),
+                x=_num(od["x"], where, "x", limit=MAX_COORD_M),
+                y=_num(od["y"], where, "y", limit=MAX_COORD_M),
                 yaw=math.radians(_num(od.get("yaw", 0.0), where, "yaw")),
-                z=_num(od.get("z", 0.0), where, "z", nonneg=True),
+                z=_num(od.get("z", 0.0), where, "z", nonneg=True, limit=MAX_SIZE_M),
                 color=_color(od.get("color"), where),
                 name=str(od.get("name", "")),
                 **kw,
@@ -447,16 +502,16 @@ def world_from_dict(data: Any, source: str = "world") -> World:
             WorldObject(
                 label=label,
                 model=model,
-                x=_num(od["x"], where, "x"),
-                y=_num(od["y"], where, "y"),
+                x=_num(od["x"], where, "x", limit=MAX_COORD_M),
+                y=_num(od["y"], where, "y", limit=MAX_COORD_M),
                 yaw=math.radians(_num(od.get("yaw", 0.0), where, "yaw")),
-                scale=_num(od.get("scale", 1.0), where, "scale", positive=True),
+                scale=_model_scale(model, od.get("scale", 1.0), where),
                 color=_color(od.get("color"), where),
                 name=str(od.get("name", "")),
             )
         )
     sd = _mapping(d["start"], "start", _START_KEYS, required=("x", "y"))
-    start = Pose2(_num(sd["x"], "start", "x"), _num(sd["y"], "start", "y"), math.radians(_num(sd.get("yaw", 0.0), "start", "yaw")))
+    start = Pose2(_num(sd["x"], "start", "x", limit=MAX_COORD_M), _num(sd["y"], "start", "y", limit=MAX_COORD_M), math.radians(_num(sd.get("yaw", 0.0), "start", "yaw")))
     routes: dict[str, list[tuple[float, float]]] = {}
     rd = d.get("routes") or {}
     if not isinstance(rd, dict):
@@ -487,9 +542,14 @@ def load_world(path: str | Path, *, validate: bool = True) -> World:
     """Read and validate a world file. ``WorldError`` (a ``ValueError``) names the problem."""
     p = Path(path)
     try:
+        size = p.stat().st_size
+        if p.is_file() and size > MAX_FILE_BYTES:
+            raise WorldError(f"{p}: {size / 2**20:.1f} MiB; world files are limited to {MAX_FILE_BYTES // 2**20} MiB")
         text = p.read_text(encoding="utf-8")
     except OSError as e:
         raise WorldError(f"cannot read world file {p}: {e.strerror or e}") from None
+    except UnicodeDecodeError:
+        raise WorldError(f"{p}: not a world file (binary data, not UTF-8 YAML text)") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
@@ -624,17 +684,54 @@ def _overlaps(a: Any, b: Any, tol: float = OVERLAP_TOL_M) -> bool:
     return not inter.buffer(-tol / 2).is_empty
 
 
+def _first_overlaps(geoms: list[Any], others: list[Any] | None = None, tol: float = OVERLAP_TOL_M) -> dict[int, list[int]]:
+    """``{i: [j, …]}`` (sorted) of the pairs that interpenetrate (:func:`_overlaps`): ``geoms[i]`` with
+    ``others[j]``, or with an earlier ``geoms[j]`` (j < i) when ``others`` is None. Candidates from an
+    STRtree, so n entries cost O(n log n) instead of n² exact tests."""
+    target = geoms if others is None else others
+    out: dict[int, list[int]] = {}
+    if not geoms or not target:
+        return out
+    tree = shapely.STRtree(target)
+    ii, jj = tree.query(geoms, predicate="intersects")
+    for i, j in sorted(zip(ii.tolist(), jj.tolist())):
+        if others is None and j >= i:
+            continue
+        if _overlaps(geoms[i], target[j], tol):
+            out.setdefault(i, []).append(j)
+    return out
+
+
+def world_region(world: World) -> Any:
+    """The area inside the walls: every area the walls enclose (doors, windows and passages closed; gaps
+    up to 5 cm at corners closed), with the walls themselves. Empty if the walls enclose nothing."""
+    walls = unary_union([w.polygon() for w in world.walls]).buffer(0.025, join_style="mitre").buffer(-0.025, join_style="mitre")
+    parts = list(getattr(walls, "geoms", [walls]))
+    filled = [Polygon(g.exterior) for g in parts if isinstance(g, Polygon) and not g.is_empty and len(g.interiors)]
+    if not filled:
+        return Polygon()
+    filled += [Polygon(g.exterior) for g in parts if isinstance(g, Polygon) and not len(g.interiors)]
+    return unary_union(filled)
+
+
 def validate_world(world: World, *, robot_radius: float = ROBOT_RADIUS_M, route_margin: float = ROUTE_MARGIN_M) -> None:
     """Check the geometry; raise :class:`WorldError` naming the first offending entry.
 
-    Walls: positive length, openings inside the wall. Objects: no overlap with a wall's solid part,
-    an obstacle or another object (doors may fill a floor-level door opening). Start: the robot's
-    disc is free. Routes: every segment keeps ``robot_radius + route_margin`` from everything.
+    Limits: at most :data:`MAX_WALLS` walls and :data:`MAX_ENTITIES` objects and obstacles, coordinates
+    within ±:data:`MAX_COORD_M`. Walls: positive length, openings inside the wall. Objects: no overlap
+    with a wall's solid part, an obstacle or another object (doors may fill a floor-level door opening),
+    and inside the walls (in an area they enclose). Start: inside the walls, the robot's disc free.
+    Routes: every segment keeps ``robot_radius + route_margin`` from everything. Candidate pairs come
+    from STRtrees, so a world at the limits validates in well under a second.
     """
     if not world.walls:
         raise WorldError("walls: a world needs at least one wall")
+    check_world_limits({"walls": world.walls, "obstacles": world.obstacles, "objects": world.objects, "routes": world.routes})
     for i, w in enumerate(world.walls):
         name = _wall_name(i, w)
+        for k, v in (("from", w.start), ("to", w.end)):
+            if max(abs(v[0]), abs(v[1])) > MAX_COORD_M:
+                raise WorldError(f"{name}: '{k}' {list(v)} is beyond ±{MAX_COORD_M:g} m")
         if w.length < 1e-6:
             raise WorldError(f"{name}: 'from' and 'to' are the same point")
         for j, o in enumerate(w.openings):
@@ -646,64 +743,80 @@ def validate_world(world: World, *, robot_radius: float = ROBOT_RADIUS_M, route_
         for (a0, a1), (b0, b1) in zip(spans, spans[1:]):
             if b0 < a1 - 1e-9:
                 raise WorldError(f"{name}: openings [{a0}, {a1}] and [{b0}, {b1}] overlap")
-    wall_geoms = [(_wall_name(i, w), w.solid_polygon()) for i, w in enumerate(world.walls)]
     for i, o in enumerate(world.obstacles):
+        if max(abs(o.x), abs(o.y)) > MAX_COORD_M:
+            raise WorldError(f"{_obstacle_name(i, o)}: ({o.x}, {o.y}) is beyond ±{MAX_COORD_M:g} m")
         if o.shape == "model" and o.model not in MODELS:
             raise WorldError(f"{_obstacle_name(i, o)}: unknown model {o.model!r}")
-    placed: list[tuple[str, Any]] = []
-    for i, o in enumerate(world.obstacles):
-        name = _obstacle_name(i, o)
-        g = Polygon(o.footprint())
-        z0, z1 = o.z_range()
-        for wn, wg in wall_geoms:
-            # wall-mounted things (paintings, TVs) may touch a wall; nothing may go into it
-            if _overlaps(g, wg):
-                raise WorldError(f"{name}: overlaps {wn}")
-        for pn, pg in placed:
-            if _overlaps(g, pg):
-                raise WorldError(f"{name}: overlaps {pn}")
-        placed.append((name, g))
     for i, o in enumerate(world.objects):
         name = _object_name(i, o)
+        if max(abs(o.x), abs(o.y)) > MAX_COORD_M:
+            raise WorldError(f"{name}: ({o.x}, {o.y}) is beyond ±{MAX_COORD_M:g} m")
         if o.label not in CLASS_NAMES:
             raise WorldError(f"{name}: unknown class {o.label!r}")
         if o.model not in MODELS:
             raise WorldError(f"{name}: unknown model {o.model!r}")
         if MODELS[o.model].label != o.label:
             raise WorldError(f"{name}: model {o.model!r} is of class {MODELS[o.model].label!r}")
-        g = Polygon(o.footprint())
-        for wn, wg in wall_geoms:
-            if _overlaps(g, wg):
-                raise WorldError(f"{name}: overlaps {wn}")
-        for pn, pg in placed:
-            if _overlaps(g, pg):
-                raise WorldError(f"{name}: overlaps {pn}")
-        placed.append((name, g))
+    wall_names = [_wall_name(i, w) for i, w in enumerate(world.walls)]
+    wall_geoms = [w.solid_polygon() for w in world.walls]
+    wall_idx = [k for k, g in enumerate(wall_geoms) if not g.is_empty]
+    # obstacles first, then objects, each against the walls and everything placed before it
+    names = [_obstacle_name(i, o) for i, o in enumerate(world.obstacles)] + [_object_name(i, o) for i, o in enumerate(world.objects)]
+    geoms = [Polygon(o.footprint()) for o in world.obstacles] + [Polygon(o.footprint()) for o in world.objects]
+    bad_wall = _first_overlaps(geoms, [wall_geoms[k] for k in wall_idx])
+    bad_prev = _first_overlaps(geoms)
+    for i in sorted(set(bad_wall) | set(bad_prev)):
+        if i in bad_wall:
+            raise WorldError(f"{names[i]}: overlaps {wall_names[wall_idx[bad_wall[i][0]]]}")
+        raise WorldError(f"{names[i]}: overlaps {names[bad_prev[i][0]]}")
+    region = world_region(world)
+    inside = shapely.covers(region, shapely.points([(o.x, o.y) for o in world.objects])) if world.objects else np.zeros(0, bool)
+    for i in np.flatnonzero(~np.asarray(inside, bool)).tolist()[:1]:
+        o = world.objects[i]
+        why = "the walls enclose no area" if region.is_empty else "not in any area the walls enclose"
+        raise WorldError(f"{_object_name(i, o)}: at ({o.x:.3f}, {o.y:.3f}) is outside every room ({why})")
+    if not region.covers(Point(world.start.x, world.start.y)):
+        why = "the walls enclose no area" if region.is_empty else "not in any area the walls enclose"
+        raise WorldError(f"start: the robot at ({world.start.x:.3f}, {world.start.y:.3f}) is outside the walls ({why})")
     blocking = world.blocking_geometry()
+    b_names = [bn for bn, _ in blocking]
+    b_geoms = [bg for _, bg in blocking]
+    tree = shapely.STRtree(b_geoms) if b_geoms else None
     disc = Point(world.start.x, world.start.y).buffer(robot_radius, 32)
-    for bn, bg in blocking:
-        if _overlaps(disc, bg, tol=1e-4):
-            raise WorldError(f"start: the robot at ({world.start.x:.3f}, {world.start.y:.3f}) overlaps {bn}")
+    if tree is not None:
+        for k in sorted(tree.query(disc, predicate="intersects").tolist()):
+            if _overlaps(disc, b_geoms[k], tol=1e-4):
+                raise WorldError(f"start: the robot at ({world.start.x:.3f}, {world.start.y:.3f}) overlaps {b_names[k]}")
     clearance = robot_radius + route_margin
+
+    def near(geom: Any) -> list[int]:
+        """Blocking entries closer than the clearance to ``geom``, in blocking order."""
+        if tree is None:
+            return []
+        cand = sorted(tree.query(geom, predicate="dwithin", distance=clearance).tolist())
+        return [k for k in cand if b_geoms[k].distance(geom) < clearance - 1e-9]
+
     for rname, pts in world.routes.items():
         for k, (x, y) in enumerate(pts):
             d = Point(x, y)
-            for bn, bg in blocking:
-                if bg.distance(d) < clearance - 1e-9:
-                    raise WorldError(
-                        f"routes[{rname!r}][{k}]: waypoint ({x:.3f}, {y:.3f}) is {bg.distance(d):.3f} m from {bn} "
-                        f"(needs {clearance:.3f} m)"
-                    )
+            hits = near(d)
+            if hits:
+                bg, bn = b_geoms[hits[0]], b_names[hits[0]]
+                raise WorldError(
+                    f"routes[{rname!r}][{k}]: waypoint ({x:.3f}, {y:.3f}) is {bg.distance(d):.3f} m from {bn} "
+                    f"(needs {clearance:.3f} m)"
+                )
         seq = [(world.start.x, world.start.y)] + list(pts) if pts else []
         for k in range(1, len(seq)):
             seg = LineString([seq[k - 1], seq[k]]) if seq[k - 1] != seq[k] else Point(seq[k])
-            for bn, bg in blocking:
-                dist = bg.distance(seg)
-                if dist < clearance - 1e-9:
-                    frm = "start" if k == 1 else f"[{k - 2}]"
-                    raise WorldError(
-                        f"routes[{rname!r}]: segment {frm} → [{k - 1}] passes {dist:.3f} m from {bn} (needs {clearance:.3f} m)"
-                    )
+            hits = near(seg)
+            if hits:
+                dist = b_geoms[hits[0]].distance(seg)
+                frm = "start" if k == 1 else f"[{k - 2}]"
+                raise WorldError(
+                    f"routes[{rname!r}]: segment {frm} → [{k - 1}] passes {dist:.3f} m from {b_names[hits[0]]} (needs {clearance:.3f} m)"
+                )
 
 
 # ----------------------------------------------------------------------------------------------

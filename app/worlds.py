@@ -980,14 +980,20 @@ class _Planner:
         return out
 
 
-def random_world(seed: int, *, n_rooms: int | None = None, extra_objects: int | None = None) -> World:
+def random_world(seed: int, *, n_rooms: int | None = None, extra_objects: int | None = None, family: str = "rooms") -> World:
     """A randomized, valid apartment: rooms with doorways, every class present, colours varied.
 
     The world is a rectangle of 7–11 × 5–8 m split into 3–5 rooms joined by doorways; outer walls
     carry windows and closed doors (class ``door``); objects stand along walls and in the open, with
     room for the robot to pass. The ``tour`` route starts at the robot and visits every room (segments
     keep the robot radius + margin from everything). Deterministic for a seed.
+    ``family`` other than ``rooms`` (``corridor``, ``lshape``, ``openplan``) builds that layout family
+    instead (:mod:`app.world_layouts`).
     """
+    if family != "rooms":
+        from app.world_layouts import generate
+
+        return generate(family, seed)
     rng = np.random.default_rng(seed)
     for attempt in range(40):
         w = _try_random_world(rng, seed, n_rooms, extra_objects)

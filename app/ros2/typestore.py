@@ -40,5 +40,9 @@ def ros2_typestore() -> Typestore:
 
 @lru_cache(maxsize=1)
 def ros1_typestore() -> Typestore:
-    """ROS 1 Noetic's types: the fallback for ROS 1 bags without embedded definitions."""
-    return get_typestore(Stores.ROS1_NOETIC)
+    """ROS 1 Noetic's types (+ tf2_msgs/TFMessage, which rosbags' Noetic store lacks): the fallback for
+    ROS 1 bags without embedded definitions."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    if "tf2_msgs/msg/TFMessage" not in store.types:
+        store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms\n", "tf2_msgs/msg/TFMessage"))
+    return store

@@ -458,7 +458,7 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
     cfg = Config()
     W, H = opts.imgsz
     rng = np.random.default_rng([int(opts.seed), int(task.index), 0x5EED])
-    sim = SimWorld(world, cfg, seed=int(task.world_seed))
+    sim = SimWorld(world, cfg, seed=int(task.world_seed), renderer=os.environ.get("OCSLAM_RENDERER", "tiny"))  # EGL skips the vertex-array overlays
     records: list[dict] = []
     img_dir = Path(opts.out) / "images" / task.split
     lbl_dir = Path(opts.out) / "labels" / task.split

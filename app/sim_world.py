@@ -94,6 +94,9 @@ RENDERERS = ("auto", "egl", "tiny")
 EGL_PLUGIN_ENV = "OCSLAM_EGL_PLUGIN"
 #: environment: the probe's verdict, passed on to child processes (render worker, dataset pool)
 EGL_PROBE_ENV = "OCSLAM_EGL_PROBE"
+#: environment: what ``auto`` means in this process and its children (``tiny`` or ``egl``), e.g. to
+#: render a dataset or a detector benchmark with one renderer: ``OCSLAM_RENDERER=tiny ocslam dataset ...``
+RENDERER_ENV = "OCSLAM_RENDERER"
 
 _PROBE_CODE = r"""
 import sys, pybullet as p
@@ -177,6 +180,8 @@ def resolve_renderer(requested: str) -> tuple[str, str]:
     (the OpenGL renderer, or why TinyRenderer is used). ``"egl"`` raises :class:`RendererError` if EGL
     cannot render here; ``"auto"`` falls back to TinyRenderer with a logged warning."""
     requested = str(requested or "auto").lower()
+    if requested == "auto" and os.environ.get(RENDERER_ENV):
+        requested = os.environ[RENDERER_ENV].strip().lower()
     if requested not in RENDERERS:
         raise RendererError(f"unknown renderer {requested!r} (choices: {', '.join(RENDERERS)})")
     if requested == "tiny":

@@ -54,3 +54,29 @@ def test_a_render_that_never_returns_is_retried_with_a_nudged_pose() -> None:
         assert first.image.data.shape == (168, 224, 3)
     finally:
         worker.close()
+
+
+def test_worker_reports_its_renderer_and_falls_back_when_egl_fails(monkeypatch) -> None:
+    """The render process says what it renders with; with an EGL plugin that cannot load it renders with
+    TinyRenderer and says why (the probe's verdict reaches the child through the environment)."""
+    from app import sim_world
+    from app.worlds import random_world
+
+    world = random_world(1001)
+    cfg = Config.load(None, ["camera.noise_std=0", "sim.renderer=tiny"])
+    worker = CameraWorker(world, cfg, seed=0, warmup=(32, 24))
+    try:
+        assert worker.renderer == "tiny" and "requested" in worker.renderer_note
+        worker.request(1.0, world.start, width=64, height=48)
+        assert worker.collect().image.data.shape == (48, 64, 3)
+    finally:
+        worker.close()
+    monkeypatch.setenv(sim_world.EGL_PLUGIN_ENV, "/nonexistent/eglRenderer.so")
+    monkeypatch.delenv(sim_world.EGL_PROBE_ENV, raising=False)
+    worker = CameraWorker(world, Config.load(None, ["sim.renderer=auto"]), seed=0)
+    try:
+        assert worker.renderer == "tiny" and "fallback" in worker.renderer_note and "does not exist" in worker.renderer_note
+    finally:
+        worker.close()
+    with pytest.raises(sim_world.RendererError):
+        CameraWorker(world, Config.load(None, ["sim.renderer=egl"]), seed=0)

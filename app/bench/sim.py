@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=int, default=3000, help="physics steps timed")
     p.add_argument("--max-duration", type=float, default=600.0, help="tour time limit (sim seconds)")
     p.add_argument("--skip-camera-tour", action="store_true", help="skip the second tour with the camera on")
+    p.add_argument("--renderer", choices=("auto", "egl", "tiny"), default=None, help="camera renderer (default: sim.renderer)")
+    p.add_argument("--lidar-caster", choices=("planar", "pybullet"), default=None, help="LIDAR ray caster (default: lidar.caster)")
     p.add_argument("--json", action="store_true")
 
 
@@ -159,6 +161,9 @@ def measure(cfg, *, route: str | None, frames: int, scans: int, steps: int, max_
         sim.close()
     return {
         "world": world.name,
+        "renderer": sim.renderer,
+        "renderer_note": sim.renderer_note,
+        "lidar_caster": cfg.lidar.caster,
         "bodies_build_s": round(build_s, 3),
         "physics_dt_s": cfg.sim.physics_dt_s,
         "step_ms": round(step_ms, 4),
@@ -171,6 +176,10 @@ def measure(cfg, *, route: str | None, frames: int, scans: int, steps: int, max_
 
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
+    if args.renderer is not None:
+        cfg.set("sim.renderer", args.renderer)
+    if args.lidar_caster is not None:
+        cfg.set("lidar.caster", args.lidar_caster)
     res = measure(cfg, route=args.route, frames=args.frames, scans=args.scans, steps=args.steps, max_duration=args.max_duration,
                   camera_tour=not args.skip_camera_tour)
     if args.json:
@@ -178,11 +187,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     rows = [
         ("physics step (drive + collision probe)", f"{res['step_ms']:.4f} ms", f"dt {res['physics_dt_s']} s"),
-        ("LIDAR scan (360 rays)", f"{res['scan_ms']:.3f} ms", "rayTestBatch"),
+        ("LIDAR scan (360 rays)", f"{res['scan_ms']:.3f} ms", res["lidar_caster"]),
     ]
     for size, c in res["camera_ms"].items():
         rows.append((f"camera {size}", f"{c['median_ms']:.1f} ms", f"+depth+seg {c['with_depth_and_segmentation_ms']:.1f} ms"))
-    table(["stage", "time", "note"], rows, title=f"ocslam bench sim — world '{res['world']}' (built in {res['bodies_build_s']} s)")
+    table(["stage", "time", "note"], rows, title=f"ocslam bench sim — world '{res['world']}' (built in {res['bodies_build_s']} s), {res['renderer_note']}")
     print()
     cam_size = "x".join(map(str, res["tour_with_camera"]["render_size"])) if res["tour_with_camera"] else "-"
     trows = []

@@ -57,13 +57,12 @@ HFOV_RAD = 1.04
 # ----------------------------------------------------------------------------------------------
 
 
-def route_poses(world: Any, route: str = "tour", step_m: float = 0.1, turn_step_rad: float = 0.15) -> NDArray[np.float64]:
-    """``(P, 3)`` poses ``[x, y, yaw]`` (world frame) the robot passes driving ``route`` from ``start``:
-    every ``step_m`` along each segment facing along it, and every ``turn_step_rad`` while turning in
-    place at a waypoint (the start pose's heading first)."""
-    pts = [(world.start.x, world.start.y)] + [tuple(p) for p in world.route(route)]
+def polyline_poses(pts: Sequence[tuple[float, float]], yaw0: float, step_m: float = 0.1, turn_step_rad: float = 0.15,
+                   ) -> tuple[NDArray[np.float64], float]:
+    """Poses ``[x, y, yaw]`` along a polyline driven from ``pts[0]`` with heading ``yaw0`` (see
+    :func:`route_poses`) and the final heading."""
     out: list[tuple[float, float, float]] = []
-    yaw = float(world.start.yaw)
+    yaw = float(yaw0)
     for (x0, y0), (x1, y1) in zip(pts[:-1], pts[1:]):
         L = math.hypot(x1 - x0, y1 - y0)
         if L < 1e-6:
@@ -76,7 +75,15 @@ def route_poses(world: Any, route: str = "tour", step_m: float = 0.1, turn_step_
         for t in np.arange(0.0, L, step_m):
             out.append((x0 + t / L * (x1 - x0), y0 + t / L * (y1 - y0), h))
     out.append((pts[-1][0], pts[-1][1], yaw))
-    return np.asarray(out, dtype=np.float64)
+    return np.asarray(out, dtype=np.float64).reshape(-1, 3), yaw
+
+
+def route_poses(world: Any, route: str = "tour", step_m: float = 0.1, turn_step_rad: float = 0.15) -> NDArray[np.float64]:
+    """``(P, 3)`` poses ``[x, y, yaw]`` (world frame) the robot passes driving ``route`` from ``start``:
+    every ``step_m`` along each segment facing along it, and every ``turn_step_rad`` while turning in
+    place at a waypoint (the start pose's heading first)."""
+    pts = [(world.start.x, world.start.y)] + [tuple(p) for p in world.route(route)]
+    return polyline_poses(pts, float(world.start.yaw), step_m, turn_step_rad)[0]
 
 
 def occluders_for(world: Any, camera_z: float = CAMERA_HEIGHT_M) -> list[Any]:
@@ -101,13 +108,15 @@ def occluders_for(world: Any, camera_z: float = CAMERA_HEIGHT_M) -> list[Any]:
 
 
 def tour_view_counts(
-    world: Any, route: str = "tour", hfov_rad: float = HFOV_RAD, max_range_m: float = 3.0, min_range_m: float = 0.3
+    world: Any, route: str = "tour", hfov_rad: float = HFOV_RAD, max_range_m: float = 3.0, min_range_m: float = 0.3,
+    occluders: list[Any] | None = None,
 ) -> NDArray[np.int64]:
     """``(N,)`` number of sampled route poses (:func:`route_poses`, 0.1 m apart) from which each object
     is in view, within 3 m by default (inside the LIDAR's 3.5 m, close enough for the detector)."""
     poses = route_poses(world, route)
     fps = [o.footprint() for o in world.objects]
-    m = in_view_matrix(poses, fps, occluders_for(world), hfov_rad, max_range_m=max_range_m, min_range_m=min_range_m)
+    occ = occluders if occluders is not None else occluders_for(world)
+    m = in_view_matrix(poses, fps, occ, hfov_rad, max_range_m=max_range_m, min_range_m=min_range_m)
     return m.sum(axis=0)
 
 
@@ -122,6 +131,7 @@ def plan_look_tour(
     approach_m: float = 0.6,
     max_legs: int = 60,
     strict: bool = True,
+    res: float = 0.05,
 ) -> list[tuple[float, float]] | None:
     """A ``tour`` that brings every object into view: from ``start``, repeatedly drive to the nearest
     object not yet seen from ``min_views`` route poses, ending with a straight ``approach_m`` run
@@ -129,23 +139,35 @@ def plan_look_tour(
     planned on the rooms family's grid (robot radius + margin + 2 cm from everything, shortened by
     string pulling). ``base`` (goals from ``start``, e.g. a hand-written loop; legs between them are
     planned) is driven first.
-    ``None`` when a leg cannot be planned or (``strict``) some object stays out of view."""
+    ``None`` when a leg cannot be planned or (``strict``) some object stays out of view. ``res``: the
+    planning grid's cell size (m)."""
     from app.worlds import ROBOT_RADIUS_M, ROUTE_MARGIN_M, _Planner
 
-    planner = _Planner(world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35)
+    planner = _Planner(world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35, res=res)
     occ = occluders_for(world)
     fps = [o.footprint() for o in world.objects]
     start = (float(world.start.x), float(world.start.y))
     route: list[tuple[float, float]] = []
 
+    seen = np.zeros(len(fps), dtype=np.int64)
+    state = {"n": 0, "yaw": float(world.start.yaw)}  # route points already counted, heading there
+
     def counts() -> NDArray[np.int64]:
-        saved = dict(world.routes)
-        world.routes["tour"] = route or [start]
-        try:
-            return tour_view_counts(world, hfov_rad=hfov_rad, max_range_m=max_range_m)
-        finally:
-            world.routes.clear()
-            world.routes.update(saved)
+        allpts = [start] + route
+        pts = allpts[max(0, state["n"] - 1):]
+        if state["n"] == 0 or len(pts) >= 2:
+            poses, state["yaw"] = polyline_poses(pts, state["yaw"])
+            if state["n"]:
+                poses = poses[1:]  # the last pose of the previous call, counted then
+            if len(poses):
+                seen[:] += in_view_matrix(poses, fps, occ, hfov_rad, max_range_m=max_range_m, min_range_m=0.3).sum(axis=0)
+            state["n"] = len(allpts)
+        return seen
+
+    def plan(a: tuple[float, float], b: tuple[float, float]) -> list[tuple[float, float]] | None:
+        if free(a) and free(b) and planner.clear(a, b):
+            return [a, b]
+        return planner.plan(a, b)
 
     def free(p: tuple[float, float]) -> bool:
         r, c = planner.cell(*p)
@@ -158,7 +180,7 @@ def plan_look_tour(
                 route.append(q)
 
     for g in base or []:  # the base goals, joined by planned legs
-        leg = planner.plan(route[-1] if route else start, (float(g[0]), float(g[1])))
+        leg = plan(route[-1] if route else start, (float(g[0]), float(g[1])))
         if leg is None:
             return None
         append(leg)
@@ -187,7 +209,7 @@ def plan_look_tour(
                     cands.append((math.hypot(p[0] - cur[0], p[1] - cur[1]) + 0.5 * abs(d - 1.5), p, v))
             cands.sort(key=lambda c: c[0])
             for _, p, v in cands[:6]:
-                leg = planner.plan(cur, p)
+                leg = plan(cur, p)
                 if leg is None or not planner.clear(leg[-1], v):
                     continue
                 append(leg)
@@ -200,7 +222,7 @@ def plan_look_tour(
         if not done_one and not todo:
             break
     if route and math.hypot(route[-1][0] - start[0], route[-1][1] - start[1]) > 0.05:
-        back = planner.plan(route[-1], start)
+        back = plan(route[-1], start)
         if back is None:
             return None
         append(back)
@@ -233,11 +255,11 @@ def _group_dining(rng: np.random.Generator) -> list[Item]:
     items = [("table", "table", 0.0, 0.0, 0.0)]
     slots = [(-0.72, -0.45, 0.0), (-0.72, 0.45, 0.0), (0.72, -0.45, math.pi), (0.72, 0.45, math.pi),
              (0.0, 1.12, -math.pi / 2), (0.0, -1.12, math.pi / 2)]
-    n = int(rng.integers(3, 7))
-    for k in sorted(rng.permutation(6)[:n]):
-        x, y, yaw = slots[int(k)]
+    chosen = sorted(int(k) for k in rng.permutation(6)[: int(rng.integers(3, 7))])
+    for k in chosen:
+        x, y, yaw = slots[k]
         items.append(("chair", "dining_chair", x, y, yaw))
-    if n >= 2 and rng.random() < 0.35 and {0, 1} <= {int(k) for k in rng.permutation(6)[:n]} | {0, 1}:
+    if {0, 1} <= set(chosen) and rng.random() < 0.4:  # a ball between the legs of two chairs
         items.append(("ball", "play_ball", -0.72, 0.0, 0.0))
     return items
 
@@ -249,7 +271,7 @@ def _group_lounge(rng: np.random.Generator) -> list[Item]:
     half = 1.1 if sofa == "sofa3" else 0.9
     items: list[Item] = [("chair", sofa, 0.5, 0.0, 0.0)]
     if rng.random() < 0.4:  # two sofas in an L
-        items.append(("chair", "sofa", 1.0 + 0.9 + 0.05, side * (half + 0.5 + 0.05), -side * math.pi / 2))
+        items.append(("chair", "sofa", 0.9, side * (half + 0.5 + 0.02), -side * math.pi / 2))  # its end against the wall
     else:
         items.append(("chair", "armchair", 1.65, side * (half + 0.55 + 0.1), -side * math.pi / 2))
     if rng.random() < 0.5:
@@ -427,6 +449,8 @@ class _Builder:
             group = unary_union(polys)
             if not group.within(zpoly) or group.buffer(-0.01).intersects(self.solid):
                 continue
+            if wall and group.distance(self.solid) > 0.03:  # the zone's side there is open floor, not a wall
+                continue
             if any(group.intersects(k) for k in self.keepout):
                 continue
             if any(group.distance(p) < GROUP_GAP_M for p in self.placed):
@@ -516,7 +540,7 @@ class _Builder:
         from app.worlds import ROBOT_RADIUS_M, ROUTE_MARGIN_M, WorldError, _Planner, validate_world
 
         zones = dict(self.zones)
-        planner = _Planner(self.world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35)
+        planner = _Planner(self.world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35, res=0.1)
         z = zones[start_zone]
         c = planner.nearest_free((z[0] + z[2]) / 2, (z[1] + z[3]) / 2, max_r=2.0)
         if c is None:
@@ -529,7 +553,7 @@ class _Builder:
             cell = planner.nearest_free((z[0] + z[2]) / 2, (z[1] + z[3]) / 2, max_r=1.5)
             if cell is not None:
                 goals.append(planner.point(cell))
-        route = plan_look_tour(self.world, goals)
+        route = plan_look_tour(self.world, goals, res=0.1)
         if route is None:
             return None
         self.world.routes = {"tour": route}
@@ -599,7 +623,9 @@ def _corridor(rng: np.random.Generator, seed: int) -> Any:
     offices = [n for n, _ in b.zones if n.startswith("office")]
     plan = []
     for n in offices:
-        plan += [(n, ["desk", "dining", "shelves", "lounge"][int(rng.integers(4))]), (n, ["shelves", "clutter", "desk"][int(rng.integers(3))])]
+        plan.append((n, ["desk", "dining", "shelves", "lounge"][int(rng.integers(4))]))
+        if rng.random() < 0.5:
+            plan.append((n, ["shelves", "clutter", "desk"][int(rng.integers(3))]))
     plan += [("corridor", "clutter")]
     b.furnish(plan)
     b.person_by_door()

@@ -239,7 +239,8 @@ def summarize(per_world: list[dict]) -> dict[str, Any]:
     from app.ocslam.evaluation import MISS_CAUSES
 
     ok = [r for r in per_world if "error" not in r]
-    mean = {k: float(np.mean([r[k] for r in ok if r.get(k) is not None])) if ok else math.nan for k in KEYS}
+    vals = {k: [r[k] for r in ok if r.get(k) is not None] for k in KEYS}
+    mean = {k: float(np.mean(v)) if v else math.nan for k, v in vals.items()}
     miss = {c: int(sum(r.get("miss_causes", {}).get(c, 0) for r in ok)) for c in MISS_CAUSES}
     fp = {c: int(sum(r.get(f"fp_{c}", 0) for r in ok)) for c in ("legs", "corner", "other")}
     return {"mean": mean, "miss_causes": miss, "fp_causes": fp, "worlds_ok": len(ok), "worlds_failed": len(per_world) - len(ok)}

@@ -467,3 +467,47 @@ def ground_truth_from_ros(objects_msg: Any, footprints_msg: Any) -> tuple[list[G
         objects.append(GroundTruthObject(id=ident, label=label, pose=pose_from_ros(d.bbox.center), footprint=poly,
                                          z_min=z0, z_max=z1, legged=legged, frame_id=str(d.header.frame_id)))
     return objects, obstacles
+
+
+# ----------------------------------------------------------------------------------------------
+# exact sidecars: the float64 values the core used (LaserScan ranges and /yolo_boxes are float32)
+# ----------------------------------------------------------------------------------------------
+def _f64_array(label: str, rows: NDArray[np.float64], cols: int, col_label: str):
+    D = _t("std_msgs/msg/MultiArrayDimension")
+    rows = np.asarray(rows, dtype=np.float64).reshape(-1, cols)
+    layout = _t("std_msgs/msg/MultiArrayLayout")(
+        dim=[D(label=label, size=len(rows), stride=cols * len(rows)), D(label=col_label, size=cols, stride=cols)],
+        data_offset=0)
+    return _t("std_msgs/msg/Float64MultiArray")(layout=layout, data=rows.reshape(-1).copy())
+
+
+def _stamp_label(kind: str, t: float) -> str:
+    ns = to_ns(t)
+    return f"{kind} stamp={ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
+
+
+def exact_ranges_to_ros(scan: LaserScan):
+    """``/ocslam/scan_ranges``: the scan's float64 ranges (``dim[0]`` = ``ranges stamp=S.N``)."""
+    return _f64_array(_stamp_label("ranges", scan.stamp), np.asarray(scan.ranges, np.float64).reshape(-1, 1), 1, "range")
+
+
+def exact_ranges_from_ros(msg: Any) -> NDArray[np.float64]:
+    return np.asarray(msg.data, dtype=np.float64)[msg.layout.data_offset:].copy()
+
+
+def exact_boxes_to_ros(dets: Detections):
+    """``/ocslam/yolo_boxes``: the boxes in float64, confidence as a fraction (columns
+    ``x1,y1,x2,y2,class_id,confidence``; ``dim[0]`` as ``/yolo_boxes``')."""
+    rows = np.array([[b.x1, b.y1, b.x2, b.y2, b.class_id, b.confidence] for b in dets.boxes], np.float64)
+    label = yolo_boxes_to_ros(Detections(dets.stamp, dets.image_width, dets.image_height)).layout.dim[0].label
+    return _f64_array(label, rows.reshape(-1, 6), 6, "x1,y1,x2,y2,class_id,confidence")
+
+
+def exact_boxes_from_ros(msg: Any) -> Detections:
+    m = _YOLO_LABEL.fullmatch(msg.layout.dim[0].label) if msg.layout.dim else None
+    if m is None:
+        raise ValueError("not an OCSLAM /ocslam/yolo_boxes layout")
+    rows = np.asarray(msg.data, dtype=np.float64)[msg.layout.data_offset:].reshape(-1, 6)
+    boxes = tuple(Detection(float(r[0]), float(r[1]), float(r[2]), float(r[3]), int(round(r[4])), float(r[5])) for r in rows)
+    return Detections(stamp=int(m.group(1)) + 1e-9 * int(m.group(2)), image_width=int(m.group(3)),
+                      image_height=int(m.group(4)), boxes=boxes)

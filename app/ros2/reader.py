@@ -27,8 +27,10 @@ from app.ros2.typestore import ros1_typestore, ros2_typestore
 log = logging.getLogger(__name__)
 
 #: processing order of events logged at the same instant (as the live loop's step runs them)
-PRIORITY = {"odom": 0, "tf": 0, "scan": 1, "image": 2, "image_raw": 2, "camera_info": 3, "boxes": 4, "map": 5,
-            "gt_pose": 6}
+PRIORITY = {"odom": 0, "tf": 0, "scan": 1, "scan_exact": 1.5, "image": 2, "image_raw": 2, "camera_info": 3, "boxes": 4,
+            "boxes_exact": 4.5, "map": 5, "gt_pose": 6}
+#: OCSLAM's float64 sidecars and the message kind each completes
+EXACT_OF = {"scan_exact": "scan", "boxes_exact": "boxes"}
 
 BASE_FRAMES = ("base_footprint", "base_link")
 
@@ -53,7 +55,8 @@ class Event:
     kind: str  # odom | tf | scan | image | image_raw | camera_info | boxes | map | gt_pose
     raw: bytes
     msgtype: str
-    _decode: Callable[["Event"], Any]
+    _decode: Callable[..., Any]
+    extra: bytes | None = None  # OCSLAM's exact float64 sidecar of this message, if recorded
 
     def decode(self) -> Any:
         return self._decode(self)
@@ -72,6 +75,7 @@ class Bag:
     ground_truth: tuple[list[GroundTruthObject], list[GroundTruthObstacle]] | None
     ocslam_recording: bool
     warnings: list[str] = field(default_factory=list)
+    stamp_step_s: float | None = None  # sim bags: stamps are whole multiples of this
     odom_source: str = "odom"  # "odom" | "tf"
     base_frame: str = "base_footprint"
 
@@ -187,8 +191,9 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
         info = yaml.safe_load((meta / "metadata.yaml").read_text(encoding="utf-8")) if (meta / "metadata.yaml").is_file() else {}
         custom = (info or {}).get("rosbag2_bagfile_information", {}).get("custom_data") or {}
         ocslam = custom.get(WRITER_KEY) == WRITER_VALUE
+        step = float(custom[topics.STAMP_STEP_KEY]) if ocslam and topics.STAMP_STEP_KEY in custom else None
     except Exception:
-        ocslam = False
+        ocslam, step = False, None
 
     def want(topic: str) -> bool:
         return only is None or topic in only or topic in (topics.TF_STATIC,)
@@ -200,6 +205,8 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
         kinds[names.image_raw] = "image_raw"
     if ocslam:
         kinds[topics.MAP] = "map"
+        kinds[topics.EXACT_RANGES] = "scan_exact"
+        kinds[topics.EXACT_BOXES] = "boxes_exact"
     # what must be there
     for topic, what in ((names.scan, "scan"),):
         if counts.get(topic, 0) == 0:
@@ -224,7 +231,10 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
     start_ns = int(reader.start_time) if reader.message_count else 0
     offset_s = 0 if start_ns < 10**6 * 10**9 else start_ns // 10**9  # wall-clock bags: whole seconds off
     offset_ns = offset_s * 10**9
-    rel = lambda ns: (int(ns) - offset_ns) * 1e-9  # noqa: E731
+    snap = _snapper(step)
+
+    def rel(ns: int) -> float:
+        return snap((int(ns) - offset_ns) * 1e-9)
 
     static: dict[tuple[str, str], np.ndarray] = {}
     cam_info: CameraInfo | None = None
@@ -236,7 +246,7 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
         return store.deserialize_cdr(raw, msgtype) if is2 else store.deserialize_ros1(raw, msgtype)
 
     wanted_conns = [c for c in conns if want(c.topic) and (c.topic in kinds or c.topic in (topics.TF_STATIC, topics.GT_OBJECTS, topics.GT_FOOTPRINTS))]
-    decoders = _decoders(deser, offset_s, odom_source)
+    decoders = _decoders(deser, offset_s, odom_source, snap)
     base_frame = "base_footprint"
     for c, ts, raw in reader.messages(connections=wanted_conns):
         topic = c.topic
@@ -256,7 +266,7 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
         if kind == "tf":
             if odom_source != "tf":
                 continue  # /tf only matters as the odometry source
-        events.append(Event(rel(ts), kind, bytes(raw), c.msgtype, decoders[kind]))
+        events.append(Event(rel(ts), kind, bytes(raw), c.msgtype, decoders.get(kind, _no_decoder)))
     if odom_source == "tf":
         base_frame = _tf_base(events)
         if base_frame is None:
@@ -268,11 +278,22 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
                 base_frame = child.lstrip("/") or "base_footprint"
                 break
     events.sort(key=lambda e: (e.t, PRIORITY[e.kind]))  # stable: bag order within a kind
+    if any(e.kind in EXACT_OF for e in events):  # fold each sidecar into the message it completes
+        last: dict[str, Event] = {}
+        kept = []
+        for e in events:
+            main = EXACT_OF.get(e.kind)
+            if main is None:
+                last[e.kind] = e
+                kept.append(e)
+            elif main in last and abs(last[main].t - e.t) < 1e-12 and last[main].extra is None:
+                last[main].extra = e.raw
+        events = kept
     duration = (events[-1].t - events[0].t) if events else 0.0
     gt = convert.ground_truth_from_ros(gt_objs, gt_fps) if gt_objs is not None else None
     return Bag(path=path, events=events, time_offset=float(offset_s), duration_s=duration, topic_counts=counts,
                topic_types=types, static_tf=static, camera_info=cam_info, ground_truth=gt, ocslam_recording=ocslam,
-               warnings=warnings, odom_source=odom_source, base_frame=base_frame)
+               warnings=warnings, odom_source=odom_source, base_frame=base_frame, stamp_step_s=step)
 
 
 def _tf_base(events: list[Event]) -> str | None:
@@ -285,8 +306,25 @@ def _tf_base(events: list[Event]) -> str | None:
     return None
 
 
-def _decoders(deser: Callable[[bytes, str], Any], offset_s: int, odom_source: str) -> dict[str, Callable]:
+def _snapper(step: float | None) -> Callable[[float], float]:
+    """Restore sim stamps to the live run's floats: ``k × step`` when within a nanosecond of one."""
+    if not step:
+        return lambda t: t
+
+    def snap(t: float) -> float:
+        k = round(t / step)
+        v = k * step
+        return v if abs(v - t) < 1e-9 else t
+
+    return snap
+
+
+def _decoders(deser: Callable[[bytes, str], Any], offset_s: int, odom_source: str,
+              snap: Callable[[float], float] = lambda t: t) -> dict[str, Callable]:
     """Per kind: ``decode(event, raw_msg=False)`` → our dataclass (or the ROS message with ``raw_msg``)."""
+
+    def _rel_stamp(stamp: Any, offset: int) -> float:
+        return snap(float(int(stamp.sec) - offset) + 1e-9 * float(stamp.nanosec))
 
     def shift(stamp_s: float) -> float:
         return stamp_s - offset_s
@@ -297,15 +335,24 @@ def _decoders(deser: Callable[[bytes, str], Any], offset_s: int, odom_source: st
     def wrap(f):
         def d(e: Event, raw_msg: bool = False):
             m = msg_of(e)
-            return m if raw_msg else f(m)
+            if raw_msg:
+                return m
+            if e.extra is not None:
+                return f(m, deser(e.extra, "std_msgs/msg/Float64MultiArray"))
+            return f(m)
 
         return d
 
-    def scan(m):
+    def scan(m, exact=None):
         from dataclasses import replace
 
         s = convert.scan_from_ros(m)
-        return replace(s, stamp=_rel_stamp(m.header.stamp, offset_s), frame_id=s.frame_id.lstrip("/"))
+        s = replace(s, stamp=_rel_stamp(m.header.stamp, offset_s), frame_id=s.frame_id.lstrip("/"))
+        if exact is not None:
+            r = convert.exact_ranges_from_ros(exact)
+            if len(r) == len(s.ranges):
+                s = replace(s, ranges=r)
+        return s
 
     def odom(m):
         _, T = convert.odom_from_ros(m)
@@ -338,11 +385,11 @@ def _decoders(deser: Callable[[bytes, str], Any], offset_s: int, odom_source: st
     def camera_info(m):
         return convert.camera_info_from_ros(m)
 
-    def boxes(m):
+    def boxes(m, exact=None):
         from dataclasses import replace
 
-        d = convert.yolo_boxes_from_ros(m)
-        return replace(d, stamp=d.stamp - offset_s)
+        d = convert.exact_boxes_from_ros(exact) if exact is not None else convert.yolo_boxes_from_ros(m)
+        return replace(d, stamp=snap(d.stamp - offset_s))
 
     def grid(m):
         return None  # only its instant matters (the SLAM's lazy grid update)
@@ -354,5 +401,6 @@ def _decoders(deser: Callable[[bytes, str], Any], offset_s: int, odom_source: st
             "camera_info": wrap(camera_info), "boxes": wrap(boxes), "map": wrap(grid), "gt_pose": wrap(gt_pose)}
 
 
-def _rel_stamp(stamp: Any, offset_s: int) -> float:
-    return float(int(stamp.sec) - offset_s) + 1e-9 * float(stamp.nanosec)
+
+def _no_decoder(e: Event, raw_msg: bool = False) -> Any:
+    raise BagError(f"{e.kind} messages are folded into the messages they complete")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import deque
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -78,6 +79,9 @@ class BagRecorder:
         self._last_odom = -1.0
         self._scans: int | None = None
         self._dets: Any = None
+        self._snap: Any = None
+        self._frames: deque | None = None  # (log time, frame, detections future) handed to the detector
+        self._unhook: Any = None
         self._next_map = 0.0
         self._next_cmd = 0.0
 
@@ -98,6 +102,9 @@ class BagRecorder:
         t0 = time.perf_counter()
         try:
             self.writer.set_custom_data(WRITER_KEY, WRITER_VALUE)
+            dt = getattr(getattr(pipe, "sim", None), "dt", None)
+            if dt:
+                self.writer.set_custom_data(topics.STAMP_STEP_KEY, repr(float(dt)))
             self.writer.open()
         except (WriterError, OSError) as e:
             raise RecordError(f"cannot create bag {self.path}: {e}") from None
@@ -113,7 +120,9 @@ class BagRecorder:
             log.warning("ground truth not recorded: %s", e)
         self._next_map = t + self.map_period
         self._scans = pipe.counters.scans
+        self._snap = pipe.fusion
         self._dets = pipe.fusion.detections
+        self._frames = deque() if self._hook_detector(pipe) else None
         self.wall_s += time.perf_counter() - t0
         return self
 
@@ -136,22 +145,12 @@ class BagRecorder:
             self._scans = pipe.counters.scans
             scan = pipe.last_scan
             self._write(topics.SCAN, convert.scan_to_ros(scan), t)
-            self._write(topics.TF, convert.tf_message(
-                [convert.transform_stamped(scan.stamp, "map", "odom", pipe.T_map_odom)]), t)
+            self._write(topics.EXACT_RANGES, convert.exact_ranges_to_ros(scan), t)
+            # map → odom as the loop publishes it now (a scan's own correction is published a period later)
+            self._write(topics.TF, convert.tf_message([convert.transform_stamped(t, "map", "odom", pipe.T_map_odom)]), t)
             if pipe.truth_log and abs(pipe.truth_log[-1][0] - scan.stamp) < 1e-9:
                 self._write(topics.GT_POSE, convert.pose_stamped(scan.stamp, "map", pipe.truth_log[-1][1]), t)
-        dets = pipe.fusion.detections
-        if dets is not None and dets is not self._dets:
-            self._dets = dets
-            img = pipe.fusion.image
-            if img is not None:
-                info = pipe.camera_model.info
-                if (info.width, info.height) != (img.width, img.height):
-                    info = info.scaled(img.width, img.height)
-                self._write(topics.IMAGE_COMPRESSED,
-                            convert.image_to_compressed(_stamped(img, dets.stamp), self.jpeg_quality, self.image_format), t)
-                self._write(topics.CAMERA_INFO, convert.camera_info_to_ros(info, dets.stamp), t)
-            self._write(topics.YOLO_BOXES, convert.yolo_boxes_to_ros(dets), t)
+        self._observe_camera(pipe, t)
         if t + 1e-9 >= self._next_cmd and pipe.drive_mode != "idle":
             self._next_cmd = t + self.cmd_period
             self._write(topics.CMD_VEL, convert.twist_to_ros(pipe.cmd), t)
@@ -159,6 +158,52 @@ class BagRecorder:
             self._next_map += self.map_period * max(1, int((t - self._next_map) / self.map_period) + 1)
             self._write_results(pipe, t)
         self.wall_s += time.perf_counter() - t0
+
+    def _hook_detector(self, pipe: "Pipeline") -> bool:
+        """See each camera frame when the loop hands it to the detector (``pipe.jobs.detect``): the frame
+        and its detections' future, logged at that instant, the one the fusion's inputs are taken at."""
+        jobs = getattr(pipe, "jobs", None)
+        detect = getattr(jobs, "detect", None)
+        if detect is None:
+            return False
+
+        def recorded_detect(fn: Any, frame: Any, *args: Any) -> Any:
+            fut = detect(fn, frame, *args)
+            if self._open:
+                self._frames.append((pipe.time, frame, fut))
+            return fut
+
+        jobs.detect = recorded_detect
+        self._unhook = lambda: setattr(jobs, "detect", detect)
+        return True
+
+    def _observe_camera(self, pipe: "Pipeline", t: float) -> None:
+        """Write the frames whose detections are ready, in the order they were taken."""
+        if self._frames is None:  # no detector hook: the last fusion's frame, logged when seen
+            snap = pipe.fusion
+            if snap is not self._snap and snap.detections is not None and snap.detections is not self._dets:
+                self._snap, self._dets = snap, snap.detections
+                self._write_frame(pipe, t, snap.image, snap.detections)
+            return
+        while self._frames and self._frames[0][2].done():
+            t_log, frame, fut = self._frames.popleft()
+            try:
+                dets = fut.result()
+            except Exception:
+                dets = None
+            if dets is not None:  # None: the detector failed on it (the loop counted it)
+                self._write_frame(pipe, t_log, getattr(frame, "image", None), dets)
+
+    def _write_frame(self, pipe: "Pipeline", t_log: float, img: Any, dets: Any) -> None:
+        if img is not None:
+            info = pipe.camera_model.info
+            if (info.width, info.height) != (img.width, img.height):
+                info = info.scaled(img.width, img.height)
+            self._write(topics.IMAGE_COMPRESSED,
+                        convert.image_to_compressed(_stamped(img, dets.stamp), self.jpeg_quality, self.image_format), t_log)
+            self._write(topics.CAMERA_INFO, convert.camera_info_to_ros(info, dets.stamp), t_log)
+        self._write(topics.YOLO_BOXES, convert.yolo_boxes_to_ros(dets), t_log)
+        self._write(topics.EXACT_BOXES, convert.exact_boxes_to_ros(dets), t_log)
 
     def _write_results(self, pipe: "Pipeline", t: float) -> None:
         """``/map``, ``/objects``, ``/objects/markers`` and ``/slam/pose_graph`` at ``t``."""
@@ -180,8 +225,14 @@ class BagRecorder:
         t0 = time.perf_counter()
         try:
             if pipe is not None:
+                wait = getattr(pipe, "wait_stages", None)
+                if wait is not None:
+                    wait()  # the detector's and the fusion's last frames
+                self.observe(pipe)
                 self._write_results(pipe, pipe.time)
         finally:
+            if self._unhook is not None:
+                self._unhook()
             self.writer.close()
             self._open = False
             self.wall_s += time.perf_counter() - t0

@@ -23,6 +23,8 @@ topic                              type                                    frame
                                                                            each scan stamp
 ``/ground_truth/objects``          vision_msgs/msg/Detection3DArray        ``map``: true objects (once)
 ``/ground_truth/footprints``       visualization_msgs/msg/MarkerArray      ``map``: true footprints (once)
+``/ocslam/scan_ranges``            std_msgs/msg/Float64MultiArray          exact ranges of each ``/scan``
+``/ocslam/yolo_boxes``             std_msgs/msg/Float64MultiArray          exact boxes of each ``/yolo_boxes``
 =================================  ======================================  =================================
 
 Stamps are sim time (the run starts at 0 s); a message's bag (log) time is when the loop produced it,
@@ -34,6 +36,12 @@ indexes :data:`app.ocslam.messages.CLASS_NAMES`; ``confidence_pct`` = confidence
 so the paper's integer row is its ``floor``). ``layout.dim[0]`` is ``{label: "boxes stamp=S.NNNNNNNNN
 image=WxH", size: N, stride: 6N}`` (the stamp and size of the image the boxes are in, since the message
 has no header) and ``layout.dim[1]`` is ``{label: "x1,y1,x2,y2,class_id,confidence_pct", size: 6, stride: 6}``.
+
+Two OCSLAM topics make a replay bit-identical to the live run: ``/ocslam/scan_ranges`` and
+``/ocslam/yolo_boxes`` (std_msgs/Float64MultiArray) carry the float64 ranges and boxes the core used
+(LaserScan and ``/yolo_boxes`` are float32), logged with the message they complete; the bag's
+``custom_data`` ``ocslam.stamp_step_s`` is the simulator's step, so stamps are restored to the exact
+``steps × step`` floats of the live run. Other tools ignore them.
 
 ``/ground_truth/footprints`` markers are ``LINE_STRIP`` polygons (closed) at ``z = z_min`` with
 ``scale.z = z_max − z_min``; ``ns`` is ``objects``, ``objects_legged``, ``walls`` or ``obstacles``;
@@ -58,6 +66,8 @@ POSE_GRAPH = "/slam/pose_graph"
 GT_POSE = "/ground_truth/pose"
 GT_OBJECTS = "/ground_truth/objects"
 GT_FOOTPRINTS = "/ground_truth/footprints"
+EXACT_RANGES = "/ocslam/scan_ranges"
+EXACT_BOXES = "/ocslam/yolo_boxes"
 
 #: topic → ROS 2 message type of everything :class:`app.ros2.recorder.BagRecorder` writes
 RECORDED_TOPICS: dict[str, str] = {
@@ -76,7 +86,12 @@ RECORDED_TOPICS: dict[str, str] = {
     GT_POSE: "geometry_msgs/msg/PoseStamped",
     GT_OBJECTS: "vision_msgs/msg/Detection3DArray",
     GT_FOOTPRINTS: "visualization_msgs/msg/MarkerArray",
+    EXACT_RANGES: "std_msgs/msg/Float64MultiArray",
+    EXACT_BOXES: "std_msgs/msg/Float64MultiArray",
 }
+
+#: the bag's custom_data key holding the simulator's step (s): every sim stamp is a whole number of steps
+STAMP_STEP_KEY = "ocslam.stamp_step_s"
 
 #: topics written once, that late subscribers must still get (transient-local QoS)
 LATCHED_TOPICS: frozenset[str] = frozenset({TF_STATIC, GT_OBJECTS, GT_FOOTPRINTS})

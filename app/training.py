@@ -66,7 +66,8 @@ class TrainOptions:
     init_weights: Path | None = None  # start from one of our own earlier checkpoints (never a download)
     fp16_weights: bool = True  # store weights as float16 in the ONNX file (half the size, same inference)
     resume: bool = False  # continue the run saved in `checkpoint` (optimizer, LR schedule, epoch counter)
-    checkpoint: Path = field(default_factory=lambda: PROJECT_ROOT / "assets" / "models" / "detector-train.pt")
+    checkpoint: Path | None = None  # resumable copy of every epoch's last.pt (the command: assets/models/detector-train.pt)
+    session_epochs: int | None = None  # stop this session after this many epochs (the schedule stays the run's)
     extra: dict[str, Any] = field(default_factory=dict)  # further ultralytics train() arguments
 
 
@@ -75,6 +76,34 @@ class TrainResult:
     model_path: Path
     card_path: Path
     card: dict[str, Any]
+    start_epoch: int = 0  # first epoch (0-based) trained in this session
+    epochs_done: int = 0  # epochs completed by the run so far (all sessions)
+    checkpoint: Path | None = None
+
+
+def _resume_checkpoint(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> Path:
+    """Prepare ``opts.checkpoint`` for ultralytics' ``resume``: a copy in this machine's run folder whose
+    saved arguments point at this dataset and folder, with ``epochs`` raised to ``opts.epochs`` when
+    that extends the schedule (one long schedule: the same LR curve, stretched only on request)."""
+    import torch
+
+    ck = Path(opts.checkpoint) if opts.checkpoint else None
+    if ck is None or not ck.is_file():
+        raise FileNotFoundError(f"--resume: no checkpoint at {ck} (a run writes one every epoch with --checkpoint)")
+    ckpt = torch.load(str(ck), map_location="cpu", weights_only=False)
+    if not isinstance(ckpt, dict) or ckpt.get("optimizer") is None or int(ckpt.get("epoch", -1)) < 0:
+        raise ValueError(f"--resume: {ck} is not a resumable checkpoint (no optimizer state or epoch counter)")
+    ta = dict(ckpt.get("train_args") or {})
+    save_dir = runs_dir / opts.name
+    ta.update(data=str(data_yaml.resolve()), project=str(runs_dir), name=opts.name, save_dir=str(save_dir),
+              exist_ok=True, device="cpu", workers=opts.workers, cache=opts.cache, time=None, plots=False)
+    if opts.epochs and int(opts.epochs) > int(ta.get("epochs", 0)):
+        ta["epochs"] = int(opts.epochs)
+    ckpt["train_args"] = ta
+    last = save_dir / "weights" / "last.pt"
+    last.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(ckpt, str(last))
+    return last
 
 
 def setup_offline(config_dir: Path) -> None:
@@ -188,7 +217,23 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
     data_yaml = _data_yaml(opts.data)
     dataset_meta = yaml.safe_load(data_yaml.read_text()).get("ocslam", {})
     runs_dir = Path(opts.runs_dir).resolve()
-    model = YOLO(opts.model, task="detect")
+    if opts.resume:
+        last = _resume_checkpoint(opts, data_yaml, runs_dir)
+        model = YOLO(str(last), task="detect")
+        args: dict[str, Any] = dict(resume=str(last))
+    else:
+        model = YOLO(opts.model, task="detect")
+        args = _fresh_args(opts, data_yaml, runs_dir)
+    _add_session_callbacks(model, opts, log)
+    log(f"{'resuming' if opts.resume else 'training'} {opts.model} on {data_yaml} at {opts.imgsz} px "
+        f"(CPU, {torch.get_num_threads()} threads)")
+    t0 = time.monotonic()
+    model.train(**args)
+    train_s = time.monotonic() - t0
+    return _finish(model, opts, data_yaml, dataset_meta, train_s, log)
+
+
+def _fresh_args(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> dict[str, Any]:
     args: dict[str, Any] = dict(
         data=str(data_yaml.resolve()),
         imgsz=opts.imgsz,
@@ -214,13 +259,46 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
         if not w.is_file():
             raise FileNotFoundError(f"no checkpoint at {w}")
         args["pretrained"] = str(w.resolve())  # ultralytics loads matching weights from this local file
-    if opts.hours:
-        args["time"] = float(opts.hours)
+    if opts.hours and opts.checkpoint is None:
+        args["time"] = float(opts.hours)  # ultralytics fits the epochs (and the LR schedule) to the budget
     args.update(opts.extra)
-    log(f"training {opts.model} on {data_yaml} at {opts.imgsz} px (CPU, {torch.get_num_threads()} threads)")
-    t0 = time.monotonic()
-    model.train(**args)
-    train_s = time.monotonic() - t0
+    return args
+
+
+def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
+    """Copy every epoch's resumable ``last.pt`` to ``opts.checkpoint`` (before ultralytics strips the
+    optimizer from it at the end), and end the session cleanly after ``opts.session_epochs`` epochs or,
+    for a resumable run, ``opts.hours`` hours (the schedule is left as it is, so the next --resume
+    continues it)."""
+    t_start = time.monotonic()
+    state = {"epochs": 0}
+
+    def on_model_save(trainer) -> None:
+        if opts.checkpoint is None:
+            return
+        last = Path(trainer.last)
+        if last.is_file():
+            atomic_write_bytes(Path(opts.checkpoint), last.read_bytes())
+
+    def on_fit_epoch_end(trainer) -> None:
+        state["epochs"] += 1
+        per_epoch = (time.monotonic() - t_start) / state["epochs"]
+        if opts.session_epochs is not None and state["epochs"] >= opts.session_epochs:
+            trainer.stop = True
+        elif opts.checkpoint is not None and opts.hours and time.monotonic() - t_start + per_epoch > opts.hours * 3600:
+            trainer.stop = True
+        if trainer.stop and trainer.epoch + 1 < trainer.epochs:
+            log(f"session ends after epoch {trainer.epoch + 1} of {trainer.epochs}; continue with --resume")
+
+    model.add_callback("on_model_save", on_model_save)
+    model.add_callback("on_fit_epoch_end", on_fit_epoch_end)
+
+
+def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict, train_s: float, log) -> TrainResult:
+    import torch
+
+    YOLO = _import_yolo()
+
     trainer = model.trainer
     save_dir = Path(trainer.save_dir)
     best_pt = save_dir / "weights" / "best.pt"
@@ -301,7 +379,8 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
     }
     atomic_write_text(out_card, "# Model card of the OCSLAM detector (written by `ocslam train-detector`)\n" + yaml.safe_dump(card, sort_keys=False))
     log(f"wrote {out_model} ({out_model.stat().st_size / 1e6:.1f} MB) and {out_card}")
-    return TrainResult(out_model, out_card, card)
+    return TrainResult(out_model, out_card, card, start_epoch=int(getattr(trainer, "start_epoch", 0)),
+                       epochs_done=len(rows), checkpoint=Path(opts.checkpoint) if opts.checkpoint else None)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -1,5 +1,6 @@
-"""The committed model (assets/models/detector.onnx) and its card: it loads, and finds the expected
-objects on a few small committed renders (tests/data/detector, made by make_images.py there)."""
+"""The committed model (assets/models/detector.onnx, int8, static input) and its card: it loads, finds
+the expected objects on a few small committed renders (tests/data/detector, made by make_images.py
+there), and agrees with the float model it was quantized from (assets/models/detector-v3.onnx)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from app.ocslam.messages import CLASS_NAMES, Image
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "assets" / "models" / "detector.onnx"
 CARD = ROOT / "assets" / "models" / "detector.yaml"
+FLOAT = ROOT / "assets" / "models" / "detector-v3.onnx"
 DATA = ROOT / "tests" / "data" / "detector"
 
 
@@ -39,6 +41,15 @@ def test_model_card_describes_the_committed_model(detector: Detector) -> None:
     assert card["model"]["sha256"] == hashlib.sha256(MODEL.read_bytes()).hexdigest()
     assert card["input"]["width"] == detector.trained_width == 224
     assert detector.input_size == (224, 192)
+    # Static input: the app's 320×240 render and the camera's 640×480 both use the one 224×192 shape.
+    assert detector.session.get_inputs()[0].shape == [1, 3, 192, 224]
+    assert detector.input_size_for(320, 240) == detector.input_size_for(640, 480) == (224, 192)
+    assert (card["input"]["width"], card["input"]["height"]) == (224, 192) and card["input"]["static"] is True
+    q = card["quantization"]
+    assert q["format"] == "QDQ" and "int8" in q["weights"] and q["calibration_data"]["command"].startswith("ocslam dataset")
+    assert card["lineage"]["previous"]["file"] == FLOAT.name
+    assert card["lineage"]["previous"]["sha256"] == hashlib.sha256(FLOAT.read_bytes()).hexdigest()
+    assert MODEL.stat().st_size < 0.6 * FLOAT.stat().st_size  # int8 weights
     assert card["dataset"]["command"].startswith("ocslam dataset") and card["dataset"]["seed"] is not None
     for k in ("precision", "recall", "map50", "map50_95"):
         assert 0.0 < card["validation"][k] <= 1.0
@@ -59,3 +70,32 @@ def test_committed_model_finds_the_expected_classes(detector: Detector) -> None:
             if obj["class"] == Path(e["image"]).stem:  # the object each image was rendered for
                 assert hit, f"{e['image']}: no {obj['class']} at {obj['box']}; got {[(d.label, round(d.confidence, 2)) for d in dets.boxes]}"
     assert found >= 0.8 * total
+
+
+def _boxes_iou(a, b) -> float:
+    return iou((a.x1, a.y1, a.x2, a.y2), (b.x1, b.y1, b.x2, b.y2))
+
+
+def test_int8_and_float_models_agree_on_the_test_renders(detector: Detector) -> None:
+    """Every detection of the float model at the app's threshold has the int8 model's detection of the
+    same class at IoU ≥ 0.85 with a confidence within 0.2, and vice versa, except detections within 0.1
+    of the threshold, which one of the two may miss."""
+    ref = Detector(DetectorConfig(), FLOAT)
+    conf = DetectorConfig().confidence
+    entries = yaml.safe_load((DATA / "expected.yaml").read_text())
+    compared = 0
+    for e in entries:
+        bgr = cv2.imread(str(DATA / e["image"]))
+        img = Image(0.0, np.ascontiguousarray(bgr[:, :, ::-1]))
+        a, b = ref.detect(img).boxes, detector.detect(img).boxes
+        for src, other in ((a, b), (b, a)):
+            for d in src:
+                same = [o for o in other if o.class_id == d.class_id]
+                best = max(same, key=lambda o: _boxes_iou(d, o), default=None)
+                if d.confidence < conf + 0.1 and (best is None or _boxes_iou(d, best) < 0.85):
+                    continue
+                assert best is not None, f"{e['image']}: {d.label} {d.confidence:.2f} found by one model only"
+                assert _boxes_iou(d, best) >= 0.85, f"{e['image']}: {d.label} boxes differ (IoU {_boxes_iou(d, best):.2f})"
+                assert abs(d.confidence - best.confidence) <= 0.2, f"{e['image']}: {d.label} {d.confidence:.2f} vs {best.confidence:.2f}"
+                compared += 1
+    assert compared >= 2 * len(entries)

@@ -44,8 +44,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--init-weights", type=Path, default=None,
                    help="start from an earlier checkpoint of ours (e.g. runs/detector/v1/weights/best.pt); never a download")
     p.add_argument("--imgsz", type=int, default=224, help="training image size (paper: 224)")
-    p.add_argument("--epochs", type=int, default=60, help="maximum epochs")
-    p.add_argument("--hours", type=float, default=1.0, help="time budget in hours (fits the epochs to it; 0: off)")
+    p.add_argument("--epochs", type=int, default=None,
+                   help="epochs of the run's schedule (default 60; with --resume: the saved run's, or this to extend it)")
+    p.add_argument("--hours", type=float, default=1.0,
+                   help="this session's time budget in hours: it ends at the last epoch that fits (0: off); the schedule "
+                        "is --epochs, continued by --resume")
     p.add_argument("--batch", type=int, default=16)
     p.add_argument("--patience", type=int, default=15, help="stop after this many epochs without a better val mAP")
     p.add_argument("--workers", type=int, default=2, help="data loader processes")
@@ -59,6 +62,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="continue the run saved in --checkpoint (optimizer, LR schedule, epoch counter)")
     p.add_argument("--checkpoint", type=Path, default=None,
                    help="resumable checkpoint written every epoch (default: assets/models/detector-train.pt)")
+    p.add_argument("--session-epochs", type=int, default=None,
+                   help="end this session after this many epochs (the run's schedule is kept; continue with --resume)")
     p.add_argument("--optimize", type=Path, default=None, metavar="FLOAT_ONNX",
                    help="no training: make the static-shape int8 inference model from this float model (see --calib)")
     p.add_argument("--calib", type=Path, default=Path("datasets/calib"),
@@ -78,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         data=args.data,
         model=args.model,
         imgsz=args.imgsz,
-        epochs=args.epochs,
+        epochs=args.epochs if args.epochs is not None else (0 if args.resume else 60),
         hours=args.hours or None,
         batch=args.batch,
         patience=args.patience,
@@ -90,8 +95,10 @@ def run(args: argparse.Namespace) -> int:
         init_weights=args.init_weights,
         resume=args.resume,
     )
-    if args.checkpoint is not None:
-        opts.checkpoint = args.checkpoint
+    from app.config import PROJECT_ROOT
+
+    opts.checkpoint = args.checkpoint or PROJECT_ROOT / "assets" / "models" / "detector-train.pt"
+    opts.session_epochs = args.session_epochs
     if args.out is not None:
         opts.out_model = args.out
     if args.runs is not None:

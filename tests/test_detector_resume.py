@@ -1,0 +1,66 @@
+"""`train-detector --resume` continues one run (optimizer, LR schedule, epoch counter) for one more epoch.
+
+A tiny synthetic dataset, 64 px, two epochs split over two sessions. Needs the [train] extra (skipped
+without ultralytics)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.test_detector_training import _tiny_dataset
+
+pytestmark = [pytest.mark.train, pytest.mark.slow]
+
+
+def _opts(tmp: Path, data: Path, **kw):
+    from app.training import TrainOptions
+
+    return TrainOptions(
+        data=data, imgsz=64, epochs=2, hours=None, batch=4, workers=0, cache=False,
+        out_model=tmp / "model" / "det.onnx", runs_dir=tmp / "runs", config_dir=tmp / "yolo",
+        checkpoint=tmp / "model" / "detector-train.pt", fp16_weights=False, **kw,
+    )
+
+
+def _lr_rows(run: Path) -> list[dict[str, float]]:
+    from app.training import _metrics_from_csv
+
+    return _metrics_from_csv(run / "results.csv")[0]
+
+
+def test_resume_continues_the_same_run_for_one_more_epoch(tmp_path: Path) -> None:
+    pytest.importorskip("ultralytics")
+    import torch
+
+    from app.training import train_detector
+
+    data = _tiny_dataset(tmp_path / "data")
+    first = train_detector(_opts(tmp_path, data, session_epochs=1), log=lambda *_: None)
+    ck = tmp_path / "model" / "detector-train.pt"
+    saved = torch.load(str(ck), map_location="cpu", weights_only=False)
+    assert saved["epoch"] == 0 and saved["optimizer"] is not None  # one epoch of two, resumable
+    assert first.epochs_done == 1
+    rows1 = _lr_rows(tmp_path / "runs" / "train")
+    assert [int(r["epoch"]) for r in rows1] == [1]
+
+    second = train_detector(_opts(tmp_path, data, resume=True), log=lambda *_: None)
+    assert second.start_epoch == 1  # the epoch counter went on
+    rows = _lr_rows(tmp_path / "runs" / "train")
+    assert [int(r["epoch"]) for r in rows] == [1, 2]  # the same run's results.csv, one more row
+    # The LR schedule went on (warm-up continues) instead of restarting at its first value.
+    assert rows[1]["lr/pg0"] != pytest.approx(rows1[0]["lr/pg0"])
+    resumed = torch.load(str(ck), map_location="cpu", weights_only=False)
+    assert resumed["epoch"] == 1 and resumed["optimizer"] is not None
+    assert resumed["train_args"]["epochs"] == 2
+    assert second.model_path.exists() and second.card["training"]["epochs_run"] == 2
+
+
+def test_resume_without_a_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
+    pytest.importorskip("ultralytics")
+    from app.training import train_detector
+
+    data = _tiny_dataset(tmp_path / "data")
+    with pytest.raises(FileNotFoundError, match="no checkpoint"):
+        train_detector(_opts(tmp_path, data, resume=True), log=lambda *_: None)

@@ -128,6 +128,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             pass
         if isinstance(e, known + (OSError,)):  # OSError: --out not writable, a file where a folder must be, …
             msg = str(e) if not isinstance(e, OSError) or not e.filename else f"{e.filename}: {e.strerror or e}"
+            msg = " ".join(str(msg).split())  # one line, whatever the message (e.g. a YAML error's excerpt)
             print(f"ocslam: error: {msg}", file=sys.stderr)
             return 2
         if os.environ.get("OCSLAM_TRACEBACK"):

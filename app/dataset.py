@@ -39,6 +39,7 @@ import multiprocessing as mp
 import os
 import queue as queue_mod
 import shlex
+import signal
 import sys
 import tempfile
 import time
@@ -441,9 +442,18 @@ _progress_queue = None
 
 
 def _init_worker(q) -> None:
+    """In each worker: the default SIGTERM action (the parent's handler, which turns SIGTERM into
+    KeyboardInterrupt, must not be inherited: a worker that unwinds while holding the progress queue's
+    lock hangs everyone), Ctrl-C left to the parent, one OpenMP thread."""
     global _progress_queue
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _progress_queue = q
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+class DatasetError(RuntimeError):
+    """Rendering failed (e.g. a worker process died); the message names the worlds left unrendered."""
 
 
 def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int], None] | None = None) -> list[dict]:
@@ -560,8 +570,80 @@ def _coco(records: list[dict]) -> dict[str, Any]:
     return {"images": images, "annotations": anns, "categories": cats}
 
 
-def build_dataset(opts: DatasetOptions, progress: bool = True) -> dict[str, Any]:
-    """Render every world (in ``opts.workers`` processes) and write the YOLO dataset. Returns a summary."""
+def _procs(ex: Any) -> list[Any]:
+    """The executor's worker processes (``ProcessPoolExecutor._processes``; empty once shut down)."""
+    return list((getattr(ex, "_processes", None) or {}).values())
+
+
+def _run_workers(tasks: list[WorldTask], opts: DatasetOptions, render: Callable[..., list[dict]], bar: Any) -> list[dict]:
+    """Render ``tasks`` in ``opts.workers`` forked processes (biggest worlds first); the records.
+
+    A worker that dies (killed, crashed) breaks the pool: the other workers are stopped and
+    :class:`DatasetError` names the worlds not rendered, instead of waiting forever for its result.
+    A normal end shuts the workers down cleanly (no terminate while one may hold a queue lock)."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = mp.get_context("fork")
+    q = ctx.Queue()
+    records: list[dict] = []
+    ex = ProcessPoolExecutor(min(opts.workers, len(tasks)), mp_context=ctx, initializer=_init_worker, initargs=(q,))
+
+    def drain() -> None:
+        try:
+            while True:
+                bar.update(q.get_nowait())
+        except (queue_mod.Empty, OSError, ValueError):
+            pass
+
+    clean = False
+    seen: dict[int, Any] = {}  # every worker process ever started (the executor forgets broken ones)
+    try:
+        order = sorted(tasks, key=lambda t: -t.images)
+        pending = {ex.submit(render, t, opts): t for t in order}
+        seen.update({p.pid: p for p in _procs(ex)})
+        while pending:
+            done, _ = wait(list(pending), timeout=0.2, return_when=FIRST_COMPLETED)
+            seen.update({p.pid: p for p in _procs(ex)})
+            drain()
+            for f in done:
+                t = pending.pop(f)
+                try:
+                    records += f.result()
+                except BrokenProcessPool:
+                    left = sorted([t.index] + [u.index for u in pending.values()])
+                    for p in seen.values():
+                        p.join(timeout=1.0)
+                    codes = sorted({p.exitcode for p in seen.values() if p.exitcode})
+                    how = f" (exit codes {', '.join(map(str, codes))})" if codes else ""
+                    raise DatasetError(
+                        f"a rendering worker process died{how}; worlds not rendered: {', '.join(map(str, left))}. "
+                        "The dataset is incomplete; run the command again"
+                    ) from None
+        drain()
+        clean = True
+    finally:
+        if clean:
+            ex.shutdown(wait=True)
+        else:  # error or Ctrl-C/SIGTERM: stop the workers now, never wait on them
+            procs = _procs(ex)
+            ex.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
+                if p.is_alive():
+                    p.kill()
+            for p in procs:
+                p.join(timeout=5)
+        q.close()
+        q.cancel_join_thread()
+    return records
+
+
+def build_dataset(opts: DatasetOptions, progress: bool = True, *, render: Callable[..., list[dict]] | None = None) -> dict[str, Any]:
+    """Render every world (in ``opts.workers`` processes) and write the YOLO dataset. Returns a summary.
+
+    ``render(task, opts)`` renders one world (default :func:`render_world`; a module-level function, since
+    workers receive it by reference). :class:`DatasetError` if a worker process dies."""
+    render = render or render_world
     from tqdm import tqdm
 
     out = Path(opts.out)
@@ -574,29 +656,9 @@ def build_dataset(opts: DatasetOptions, progress: bool = True) -> dict[str, Any]
     try:
         if opts.workers <= 1 or len(tasks) == 1:
             for t in tasks:
-                records += render_world(t, opts, progress=bar.update)
+                records += render(t, opts, progress=bar.update)
         else:
-            ctx = mp.get_context("fork")
-            q = ctx.Queue()
-            with ctx.Pool(min(opts.workers, len(tasks)), initializer=_init_worker, initargs=(q,)) as pool:
-                # biggest worlds first, so the last process is not left alone with a long one
-                order = sorted(tasks, key=lambda t: -t.images)
-                pending = [pool.apply_async(render_world, (t, opts)) for t in order]
-                while pending:
-                    try:
-                        while True:
-                            bar.update(q.get(timeout=0.2))
-                    except queue_mod.Empty:
-                        pass
-                    done = [a for a in pending if a.ready()]
-                    for a in done:
-                        records += a.get()
-                        pending.remove(a)
-                while True:
-                    try:
-                        bar.update(q.get_nowait())
-                    except queue_mod.Empty:
-                        break
+            records = _run_workers(tasks, opts, render, bar)
     finally:
         bar.close()
     records.sort(key=lambda r: r["file_name"])

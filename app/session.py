@@ -198,6 +198,15 @@ def is_run_dir(path: Path) -> bool:
     return names <= RUN_FILES or any(m in names for m in RUN_MARKERS)
 
 
+def _probe_writable(base: Path, out: Path, what: str) -> None:
+    """Create and remove an empty temporary folder in ``base`` (``os.access`` says yes to root even on a
+    read-only mount); :class:`SessionError` if that fails."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".ocslam-probe-", dir=base))
+    except OSError as e:
+        raise SessionError(f"{what} {out}: {base} is not writable ({e.strerror or e})") from None
+
+
 def check_run_dir(out: str | os.PathLike[str], *, what: str = "--out") -> Path:
     """Check that a run directory can be written at ``out`` without writing anything there.
 
@@ -218,8 +227,7 @@ def check_run_dir(out: str | os.PathLike[str], *, what: str = "--out") -> Path:
     base = _nearest_existing(out.parent)
     if not base.is_dir():
         raise SessionError(f"{what} {out}: {base} is a file, not a directory")
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise SessionError(f"{what} {out}: {base} is not writable")
+    _probe_writable(base, out, what)
     prev = out.with_name(out.name + ".prev")
     if prev.exists() and not (prev.is_dir() and is_run_dir(prev)):
         raise SessionError(f"{what} {out}: {prev} exists and is not a run directory; move it away first")
@@ -236,8 +244,7 @@ def check_out_file(out: str | os.PathLike[str], *, what: str = "--out") -> Path:
     base = _nearest_existing(out.parent)
     if not base.is_dir():
         raise SessionError(f"{what} {out}: {base} is a file, not a directory")
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise SessionError(f"{what} {out}: {base} is not writable")
+    _probe_writable(base, out, what)
     return out
 
 
@@ -410,6 +417,12 @@ class SessionData:
     def slam(self, slam_cfg: Any = None) -> Any:
         """The SLAM back end rebuilt from the state (checked: finite keyframe poses and trajectory)."""
         return restore_slam(self.path, slam_cfg if slam_cfg is not None else self.cfg.slam, self.state)
+
+    def check(self) -> "SessionData":
+        """Rebuild (and so check) the SLAM and object states too; :class:`SessionError` on any problem."""
+        self.slam()
+        self.consciousness()
+        return self
 
     def consciousness(self, cons_cfg: Any = None, camera_model: Any = None) -> Any:
         """The object tracker rebuilt from the state (checked: finite poses, sizes and presences)."""

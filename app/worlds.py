@@ -538,6 +538,14 @@ def world_from_dict(data: Any, source: str = "world") -> World:
     )
 
 
+def yaml_error_line(e: Exception) -> str:
+    """A PyYAML error as one line: ``line L, column C: problem``."""
+    mark = getattr(e, "problem_mark", None)
+    problem = getattr(e, "problem", None) or str(e)
+    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+    return " ".join(f"{where}{problem}".split())
+
+
 def load_world(path: str | Path, *, validate: bool = True) -> World:
     """Read and validate a world file. ``WorldError`` (a ``ValueError``) names the problem."""
     p = Path(path)
@@ -553,7 +561,7 @@ def load_world(path: str | Path, *, validate: bool = True) -> World:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
-        raise WorldError(f"{p}: malformed YAML: {e}") from None
+        raise WorldError(f"{p}: malformed YAML: {yaml_error_line(e)}") from None
     try:
         world = world_from_dict(data, source=str(p))
     except WorldError as e:

@@ -43,15 +43,15 @@ def run(args: argparse.Namespace) -> int:
     from app.labels import LabelFilter
 
     if args.worlds < 0 or args.per_world < 1:
-        print("ocslam dataset: --worlds must be ≥ 0 and --per-world ≥ 1", file=sys.stderr)
+        print("ocslam: error: dataset: --worlds must be ≥ 0 and --per-world ≥ 1", file=sys.stderr)
         return 2
     if not 0.0 <= args.val_fraction <= 1.0 or not 0.0 <= args.min_visible <= 1.0:
-        print("ocslam dataset: --val-fraction and --min-visible must be in [0, 1]", file=sys.stderr)
+        print("ocslam: error: dataset: --val-fraction and --min-visible must be in [0, 1]", file=sys.stderr)
         return 2
     try:
         imgsz = parse_imgsz(args.imgsz)
     except ValueError as e:
-        print(f"ocslam dataset: {e}", file=sys.stderr)
+        print(f"ocslam: error: dataset: {e}", file=sys.stderr)
         return 2
     opts = DatasetOptions(
         out=args.out,
@@ -69,11 +69,19 @@ def run(args: argparse.Namespace) -> int:
     )
     import signal
 
+    from app.dataset import DatasetError
+
     def _stop(signum, frame):  # SIGTERM (e.g. kill of a background run) stops the worker processes too
         raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, _stop)
-    meta = build_dataset(opts, progress=not args.quiet)
+    old = signal.signal(signal.SIGTERM, _stop)  # the workers reset it to the default (app.dataset._init_worker)
+    try:
+        meta = build_dataset(opts, progress=not args.quiet)
+    except DatasetError as e:
+        print(f"ocslam: error: {e}", file=sys.stderr)
+        return 2
+    finally:
+        signal.signal(signal.SIGTERM, old)
     print(
         f"wrote {args.out}: {meta['images']['train']} train / {meta['images']['val']} val images, "
         f"{meta['boxes']['train']} / {meta['boxes']['val']} boxes, "

@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from app.session import check_out_file, read_session
 
     session: Path = args.session
-    data = read_session(session)  # SessionError for a missing/corrupt session or a missing config.yaml
+    data = read_session(session).check()  # SessionError for a missing/corrupt session or a missing config.yaml
     cfg, state = data.cfg, data.state
     if what == "map":
         from app.ocslam.mapio import save_map
@@ -108,8 +108,6 @@ def run(args: argparse.Namespace) -> int:
         if html == out:
             raise ConfigError(f"--out {args.out}: name the .viser file; the .html player is written beside it")
         check_out_file(html, what="the player")
-        data.slam()  # checked before the (slow) pipeline is built
-        data.consciousness()
         cfg.set("detector.kind", "none")
         pipe = Pipeline(cfg)
         try:

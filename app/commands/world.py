@@ -33,6 +33,9 @@ def run(args: argparse.Namespace) -> int:
 
     cmd = getattr(args, "world_command", None)
     if cmd == "random":
+        from app.session import check_out_file
+
+        check_out_file(args.out)  # before the (seconds-long) generation
         if getattr(args, "family", "rooms") != "rooms":
             from app.world_layouts import generate
 

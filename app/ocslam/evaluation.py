@@ -15,6 +15,15 @@ False positives by cause, in this order:
 
 Strict precision = TP / in_map; lenient precision = (TP + legs) / in_map (the paper's 81 %);
 recall = TP / in_scene; F1 from strict precision and recall.
+
+False negatives by cause (:func:`explain_misses`, :data:`MISS_CAUSES`), the first that applies, in the
+pipeline's order: ``never_in_view`` (no camera pose of the run had it in the field of view, unoccluded,
+within range: :func:`in_view_matrix`), ``never_detected`` (in view, but no box of its class covered its
+image columns), ``no_lidar_support`` (boxed, but never a LIDAR return on it inside such a box),
+``merged`` (a shown object that stands for another true object, or a false positive, lies on it),
+``below_threshold`` (an object of its class is tracked there with presence below the threshold),
+``lost`` (none of these: nothing of its class near it in the final map). The evidence per frame is
+gathered by an :class:`ObservationLog` from ground truth on the evaluation's side only.
 """
 
 from __future__ import annotations

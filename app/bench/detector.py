@@ -412,7 +412,7 @@ def run(args: argparse.Namespace) -> int:
     if len(results) == 1:  # the single-model layout of earlier versions (flat keys)
         out.update({k: v for k, v in results[0].items() if k not in out})
     if args.json:
-        print_json(out)
+        print_json(out, file=sys.stdout)
         return 0
     print(f"held-out data: {desc}; {len(samples)} images; threshold {conf}")
     for det, res in zip(dets, results):

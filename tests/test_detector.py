@@ -176,3 +176,29 @@ def test_bad_images_give_a_clear_error() -> None:
     with pytest.raises(DetectorError, match="shape"):
         _as_rgb(np.zeros((10, 10, 2), np.uint8))
     assert _as_rgb(np.zeros((10, 10), np.uint8)).shape == (10, 10, 3)
+
+
+def test_letterbox_into_a_kept_buffer_matches_a_fresh_one() -> None:
+    rng = np.random.default_rng(3)
+    a = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    b = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    fresh_b, lb = letterbox(b, 224, 192)
+    buf, _ = letterbox(a, 224, 192)
+    kept, lb2 = letterbox(b, 224, 192, out=buf)  # reused: only the content is rewritten
+    assert kept is buf and lb2 == lb
+    np.testing.assert_array_equal(kept, fresh_b)
+    np.testing.assert_allclose(kept[0, :, : int(lb.pad_y), :], 114 / 255, atol=1e-7)
+
+
+def test_detector_reuses_its_input_tensor_across_image_sizes() -> None:
+    from pathlib import Path as _P
+
+    from app.ocslam.messages import Image
+
+    model = _P(__file__).resolve().parents[1] / "assets" / "models" / "detector.onnx"
+    det = Detector(DetectorConfig(), model)
+    img = np.full((240, 320, 3), 90, np.uint8)
+    out1, _ = det.infer(img)
+    det.detect(Image(0.0, np.full((300, 300, 3), 255, np.uint8)))  # another shape in between (side padding)
+    out2, _ = det.infer(img)
+    np.testing.assert_array_equal(out1, out2)  # same image, same output: no stale pixels or padding

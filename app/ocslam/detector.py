@@ -23,6 +23,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import math
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -366,6 +367,7 @@ class Detector:
         self.num_classes = len(self.class_names)
         self._blob: NDArray[np.float32] | None = None
         self._blob_key: tuple[int, int] | None = None
+        self._lock = threading.Lock()
         # One dry run: a file that loads but computes the wrong thing fails here, not in the loop.
         probe_w, probe_h = self.input_size_for(640, 480)
         try:
@@ -395,16 +397,17 @@ class Detector:
         """Raw network output ``(1, 4 + C, N)`` for an ``(H, W, 3)`` RGB image, and its letterbox.
 
         The input tensor is kept between calls (its grey padding is written once per image size), so a
-        stream of same-size camera images allocates nothing for preprocessing. Not thread-safe: one
-        Detector per thread."""
+        stream of same-size camera images allocates nothing for preprocessing; a lock keeps concurrent
+        callers from sharing it mid-frame."""
         rgb = _as_rgb(rgb)
         key = (rgb.shape[1], rgb.shape[0])
-        if self._blob_key != key:
-            w_in, h_in = self.input_size_for(*key)
-            self._blob = np.full((1, 3, h_in, w_in), np.float32(PAD_VALUE / 255.0), np.float32)
-            self._blob_key = key
-        blob, lb = letterbox(rgb, self._blob.shape[3], self._blob.shape[2], out=self._blob)
-        out = self.session.run(None, {self._input_name: blob})[0]
+        with self._lock:
+            if self._blob_key != key:
+                w_in, h_in = self.input_size_for(*key)
+                self._blob = np.full((1, 3, h_in, w_in), np.float32(PAD_VALUE / 255.0), np.float32)
+                self._blob_key = key
+            blob, lb = letterbox(rgb, self._blob.shape[3], self._blob.shape[2], out=self._blob)
+            out = self.session.run(None, {self._input_name: blob})[0]
         return out, lb
 
     def detect(self, image: Image) -> Detections:

@@ -41,10 +41,13 @@ def area_candidate(
     cfg: ConsciousnessConfig,
     cam: CameraModel,
     scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None],
+    other_boxes: FloatArray | None = None,
 ) -> tuple[Candidate | None, list[Island]]:
     """The object bounding area ``k`` proposes in this frame (``None``: no consistent island, and no
     ground-plane placement), and the area's islands. ``pts``: ``(N, 2)`` scan points (``base_scan``),
-    ``idx`` those assigned to the area; ``beam_b``/``beam_r``: every beam about the apex."""
+    ``idx`` those assigned to the area; ``beam_b``/``beam_r``: every beam about the apex;
+    ``other_boxes``: ``(M, 4)`` the frame's other boxes (camera pixels), whose objects may hide this
+    one's lower part."""
     pc = prior(area.label)
     z_lidar = cam.lidar_height
     ray_dir_scan = np.array([np.cos(area.bearing_center), np.sin(area.bearing_center)])
@@ -81,11 +84,13 @@ def area_candidate(
         b, r = cam.bearing_ranges_scan(isl.points)
         r_front = float(r.min())
         if r_front > cfg.max_object_range_m:
+            isl.reason = "out_of_range"
             rep.reject("out_of_range")
             continue
         reason = None
         behind = False
         if isl.physical_extent > pc.max_island:
+            isl.reason = "too_big"
             rep.reject("too_big")  # a wall or furniture piece, never a leg of this class
             continue
         if (
@@ -99,6 +104,7 @@ def area_candidate(
         ):
             # a point or two of something larger that the wedge clips (for a box cut by the border,
             # of something larger than the class)
+            isl.reason = "sliver"
             rep.reject("sliver")
             continue
         if cfg.corner_check:
@@ -116,7 +122,10 @@ def area_candidate(
                 uv, depth = cam.project(pts3)
                 ok = depth > 0.05
                 if np.any(ok) and y2 < float(np.min(uv[ok, 1])) - float(cfg.bottom_margin_px) - 2.0:
-                    reason = "corner_height"
+                    # ... unless another box covers the island's pixels there: its object may hide the
+                    # lower part of this box's object from the camera (chairs in front of a table's legs)
+                    if not _hidden_by_other_box(uv[ok], other_boxes, float(cfg.bottom_margin_px)):
+                        reason = "corner_height"
             if reason is None:
                 app_w = (x2 - x1) * r_front / fx
                 app_h = (y2 - y1) * r_front / fy
@@ -135,6 +144,7 @@ def area_candidate(
                 elif _grid_free(area, pc, r_front, T_map_scan, grid):
                     reason = "corner_free_space"
         if reason is not None:
+            isl.reason = reason
             rep.reject(reason)
             continue
         off = area.angular_offsets(isl.points)
@@ -144,6 +154,7 @@ def area_candidate(
             ang = float(min(abs(off.min()), abs(off.max())))
         behind_ok.append(i)
         if behind:
+            isl.reason = "behind"
             rep.reject("behind")
             continue
         passing.append((i, ang / half, r_front))
@@ -158,6 +169,8 @@ def area_candidate(
         group = [best]
         if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max:
             group = _group_legs(best, islands, behind_ok, pc)
+            if cfg.point_ownership:
+                group = corner_legs(group, islands, float(cfg.leg_corner_m))
         pts_scan = np.vstack([islands[g].points for g in group])
         pts_map = T_map_scan.transform_points(pts_scan)
         app = float("nan")
@@ -232,6 +245,16 @@ def area_candidate(
         islands,
     )
 
+def _hidden_by_other_box(uv: FloatArray, other_boxes: FloatArray | None, margin_px: float) -> bool:
+    """True if most ``(K, 2)`` pixels lie inside one of the other boxes (grown by ``margin_px``)."""
+    if other_boxes is None or len(other_boxes) == 0 or len(uv) == 0:
+        return False
+    b = np.asarray(other_boxes, dtype=np.float64).reshape(-1, 4)
+    u, v = uv[:, 0][:, None], uv[:, 1][:, None]
+    inside = (u >= b[:, 0] - margin_px) & (u <= b[:, 2] + margin_px) & (v >= b[:, 1] - margin_px) & (v <= b[:, 3] + margin_px)
+    return bool(np.mean(inside.any(axis=1)) > 0.5)
+
+
 def _see_through(area: BoundingArea, pc: ClassPrior, r_front: float, beam_b: FloatArray, beam_r: FloatArray) -> bool:
     """True if most beams through the box's solid centre pass far behind ``r_front``."""
     off = angle_wrap(beam_b - area.bearing_center)
@@ -279,6 +302,37 @@ def _group_legs(best: int, islands: list[Island], eligible: list[int], pc: Class
         if pc.legs_fit(float(d[0]), float(d[1])):
             group.append(i)
             pts = trial
+    return group
+
+
+def corner_legs(group: list[int], islands: list[Island], corner_m: float) -> list[int]:
+    """The shape prior of legged furniture: its legs stand at the corners of its footprint.
+
+    Islands of ``group`` farther than ``corner_m`` from every corner of the group's rectangle (a chair
+    leg between two table legs, along the table's edge) are not its legs: the worst is dropped and the
+    rectangle refitted until every island stands at a corner (two islands always do). ``corner_m``
+    ≤ 0 keeps the group.
+    """
+    group = list(group)
+    if corner_m <= 0.0:
+        return group
+    while len(group) > 2:
+        pts = np.vstack([islands[g].points for g in group])
+        th, lo, hi = min_area_rect(pts)
+        c, s = np.cos(th), np.sin(th)
+        worst, worst_d = -1, 0.0
+        for j, g in enumerate(group):
+            p = islands[g].points
+            a = p[:, 0] * c + p[:, 1] * s
+            b = -p[:, 0] * s + p[:, 1] * c
+            da = np.minimum(np.abs(a - lo[0]), np.abs(a - hi[0]))
+            db = np.minimum(np.abs(b - lo[1]), np.abs(b - hi[1]))
+            dist = float(np.min(np.hypot(da, db)))
+            if dist > worst_d:
+                worst, worst_d = j, dist
+        if worst_d <= corner_m:
+            break
+        del group[worst]
     return group
 
 def _ground_plane_center(

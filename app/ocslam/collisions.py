@@ -5,13 +5,97 @@ Within one frame between the candidates of its boxes, and after the updates betw
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.footprint import ObjectEvidence, estimate_footprint
+from app.ocslam.footprint import ObjectEvidence, estimate_footprint, min_area_rect
+from app.ocslam.projection import BoundingArea
 from app.ocslam.tracks import FreeFn, Track, along_ray_close, co_observed, contiguous, merge_tracks, overlap_fraction
+
+FloatArray = NDArray[np.float64]
+
+
+def ownership_order(areas: Sequence[BoundingArea]) -> list[int]:
+    """The order in which a frame's boxes choose their objects: the most constrained first.
+
+    A narrow box can only be explained by the few islands in its narrow wedge, a wide one has more
+    choice (a chair's box inside a table's: the chair's legs are the chair's). Boxes of about the same
+    angular width go nearest projection first (the paper's assumption 3: the near range of the bottom
+    edge; a box cut at the bottom is nearest), then the higher confidence."""
+
+    def key(k: int) -> tuple[float, float, float, int]:
+        a = areas[k]
+        r = float(a.near_range_lo) if np.isfinite(a.near_range_lo) else 0.0
+        return (round(float(a.half_angle) / np.deg2rad(2.0)), r, -a.confidence, k)
+
+    return sorted(range(len(areas)), key=key)
+
+
+def strong_points(t: Track) -> FloatArray:
+    """``(K, 2)`` the object's well-seen evidence points (voxels seen in at least a tenth of the best one's frames)."""
+    ev = t.evidence
+    if not ev.has_points:
+        return ev.points
+    return ev.points[ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))]
+
+
+def one_instance(a: Track, b: Track) -> bool:
+    """True if two same-class objects' well-seen points together fit one instance of the class (one
+    of its typical shapes; for legs seen as legs, the legs of one instance). Without points on either
+    side only their footprints can tell: True."""
+    pa, pb = strong_points(a), strong_points(b)
+    if len(pa) == 0 or len(pb) == 0:
+        return True
+    _th, lo, hi = min_area_rect(np.vstack([pa, pb]))
+    d = hi - lo
+    pc = a.prior
+    if not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
+        return False
+    legs = pc.legged and all(t.evidence.leg_obs * 2 > t.evidence.observations for t in (a, b))
+    return not legs or pc.legs_fit(float(d[0]), float(d[1]))
+
+
+def shared_fractions(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> tuple[float, float]:
+    """``(share of a's points on b's, share of b's on a's)``, "on" = within half the island gap."""
+    if len(a) == 0 or len(b) == 0:
+        return 0.0, 0.0
+    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    da, _ = cKDTree(b).query(a, k=1)
+    db, _ = cKDTree(a).query(b, k=1)
+    return float(np.mean(da <= gap)), float(np.mean(db <= gap))
+
+
+def strip_points(t: Track, other: FloatArray, cfg: ConsciousnessConfig, known_free: FreeFn | None) -> bool:
+    """Remove from ``t``'s evidence the voxels lying on ``other``'s points (they are the other object's);
+    True if ``t`` keeps well-seen points of its own (its footprint is re-estimated)."""
+    ev = t.evidence
+    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    d, _ = cKDTree(other).query(ev.points, k=1)
+    keep = d > gap
+    ev.points, ev.hits, ev.point_kf = ev.points[keep], ev.hits[keep], ev.point_kf[keep]
+    if not ev.has_points:
+        return False
+    t.refresh(known_free)
+    return t.footprint is not None
+
+
+def shares_evidence(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> bool:
+    """True if two objects rest on the same LIDAR evidence: at least ``shared_evidence_fraction`` of the
+    smaller point set lies within half the island gap of the other (or either has no points, when only
+    their footprints can tell). Objects of different classes side by side (a chair pushed under a
+    table) have their own points and do not collide."""
+    if len(a) == 0 or len(b) == 0:
+        return True
+    small, big = (a, b) if len(a) <= len(b) else (b, a)
+    d, _ = cKDTree(big).query(small, k=1)
+    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    return float(np.mean(d <= gap)) >= float(cfg.shared_evidence_fraction)
 
 
 def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessConfig, rep: FrameReport) -> None:
@@ -41,7 +125,9 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                         a.footprint = estimate_footprint(ev, prior(a.label)) or a.footprint
                     b.status = "collision"
                     rep.reject("merged_in_frame")
-            elif frac >= max(ov, 0.5) or d < 0.5 * thr:
+            elif (frac >= max(ov, 0.5) or d < 0.5 * thr) and (
+                not cfg.point_ownership or shares_evidence(a.points, b.points, cfg)
+            ):
                 if abs(a.near_range - b.near_range) > 1e-6:
                     loser = b if a.near_range < b.near_range else a
                 else:
@@ -80,6 +166,8 @@ def resolve_track_collisions(
             frac = overlap_fraction(a.footprint, b.footprint)
             if a.label == b.label:
                 same = d < thr or frac >= ov
+                if same and cfg.point_ownership and not one_instance(a, b):
+                    same = False  # overlapping, but together larger than any instance: two objects
                 if not same:
                     # pieces of one object seen from different sides or only in parts (cut by the
                     # image border): close (touching; within the class's length for partial views)
@@ -99,6 +187,28 @@ def resolve_track_collisions(
                     rep.merged += 1
                     if drop is a:
                         break
+            elif cfg.point_ownership and a.evidence.has_points and b.evidence.has_points:
+                # Objects of different classes, both with LIDAR points: ownership of the points they
+                # share. Side by side (each on its own points) both stay. One nested in the other
+                # (a chair pushed under a table's edge) keeps the shared points, the larger loses
+                # them. Otherwise (two labels on one object) the one with more evidence stays.
+                pa, pb = strong_points(a), strong_points(b)
+                sa, sb = shared_fractions(pa, pb, cfg)
+                if max(sa, sb) < float(cfg.shared_evidence_fraction):
+                    continue
+                small, big = (a, b) if a.footprint.area <= b.footprint.area else (b, a)
+                if small.footprint.area < 0.5 * big.footprint.area and not small.partial_only:
+                    if strip_points(big, strong_points(small), cfg, known_free):
+                        continue
+                    drop = big
+                else:
+                    ka = (a.complete_views > 0, a.presence, a.frames, a.detections, -a.created)
+                    kb = (b.complete_views > 0, b.presence, b.frames, b.detections, -b.created)
+                    drop = b if ka >= kb else a
+                removed.add(drop.id)
+                rep.removed += 1
+                if drop is a:
+                    break
             elif frac >= max(ov, 0.5):
                 both_now = a.touched_stamp == stamp and b.touched_stamp == stamp
                 if both_now and abs(a.near_range - b.near_range) > 1e-6:

@@ -344,8 +344,24 @@ class ConsciousnessConfig:
     )
     point_ownership: bool = param(
         True,
-        help="improved: each LIDAR island belongs to one box's object per frame (boxes nearest the camera choose first); "
-        "objects of different classes collide only when they share points",
+        help="improved: each LIDAR island belongs to one box's object per frame (the narrowest boxes choose first, then "
+        "the nearest); objects of different classes collide only over the points they share",
+        live=True,
+    )
+    leg_corner_m: float = param(
+        0.12, min=0.0, max=1.0, step=0.01, unit="m",
+        help="improved: a leg island farther than this from every corner of its group's rectangle is not one of its legs (0: off)",
+        live=True,
+    )
+    shared_evidence_fraction: float = param(
+        0.5, min=0.0, max=1.0, step=0.05,
+        help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",
+        live=True,
+    )
+    point_ownership: bool = param(
+        True,
+        help="improved: each LIDAR island belongs to one box's object per frame (the narrowest boxes choose first, then "
+        "the nearest); objects of different classes collide only over the points they share",
         live=True,
     )
     shared_evidence_fraction: float = param(

@@ -47,7 +47,7 @@ from shapely.geometry import Polygon
 from app.ocslam.area_candidate import area_candidate
 from app.ocslam.association import associate, bearing_match, sighting
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
-from app.ocslam.collisions import resolve_frame_collisions, resolve_track_collisions
+from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.footprint import NO_KEYFRAME, Footprint, ObjectEvidence
 from app.ocslam.ghosts import decay_tracks
@@ -392,7 +392,8 @@ class Consciousness:
         rep.areas = areas
         if len(areas) < len(boxes):
             rep.reject("bad_box", len(boxes) - len(areas))
-        member = assign_points(pts_all, areas, exclusive=True, range_tolerance=float(cfg.range_tolerance))
+        ownership = bool(cfg.point_ownership)
+        member = assign_points(pts_all, areas, exclusive=not ownership, range_tolerance=float(cfg.range_tolerance))
 
         # the whole scan's clusters: an island clipped by its area may belong to a wall
         labels, extents = (
@@ -401,15 +402,28 @@ class Consciousness:
             else (None, None)
         )
         self._scan_clusters = (labels, extents)
-        candidates: list[Candidate | None] = []
-        for k, area in enumerate(areas):
-            idx = np.flatnonzero(member[:, k])
+        candidates: list[Candidate | None] = [None] * len(areas)
+        rep.islands = [[] for _ in areas]
+        # Point ownership: the boxes nearest the camera choose their object first (the paper's
+        # assumption 3) and the islands it takes are no longer available to the boxes behind it (a
+        # chair's legs are not the table's). Without ownership every point was given to one area by
+        # its range alone (projection.assign_points).
+        owned = np.zeros(len(pts_all), dtype=bool)
+        box_px = np.array([a.box_px for a in areas], dtype=np.float64).reshape(-1, 4)
+        for k in ownership_order(areas) if ownership else range(len(areas)):
+            area = areas[k]
+            idx = np.flatnonzero(member[:, k] & ~owned)
             area.points = pts_all[idx]
+            others = box_px[[j for j in range(len(areas)) if j != k and areas[j].label != area.label]] if ownership else None
             cand, isl = area_candidate(
-                k, area, pts_all, idx, beam_b_apex, beam_r_apex, T_map_scan, T_map_base, grid, rep, cfg, cam, self._scan_clusters
+                k, area, pts_all, idx, beam_b_apex, beam_r_apex, T_map_scan, T_map_base, grid, rep, cfg, cam, self._scan_clusters,
+                others,
             )
-            rep.islands.append(isl)
-            candidates.append(cand)
+            rep.islands[k] = isl
+            candidates[k] = cand
+            if ownership and cand is not None:
+                for g in cand.islands:
+                    owned[isl[g].indices] = True
         resolve_frame_collisions(candidates, cfg, rep)
         rep.chosen = candidates
 

@@ -37,6 +37,8 @@ class Island:
     #: extent of the whole scan cluster this island belongs to (it may continue outside its area);
     #: NaN when unknown
     full_extent: float = float("nan")
+    #: why the fusion rejected it in its area (``None``: it passed), for the UI and diagnostics
+    reason: str | None = None
 
     @cached_property
     def polygon(self) -> Polygon:

@@ -248,7 +248,11 @@ def update_track(
     if len(cand.points) and t.evidence.has_points:
         _th, lo, hi = min_area_rect(np.vstack([t.evidence.points, cand.points]))
         d = hi - lo
-        if not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
+        ok = pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25)
+        if ok and cfg.point_ownership and pc.legged and cand.legs and t.evidence.leg_obs * 2 > t.evidence.observations:
+            # legs joining legs: together they must still be the legs of one instance (its leg shapes)
+            ok = pc.legs_fit(float(d[0]), float(d[1]))
+        if not ok:
             # the union would not fit one object of this class: keep the track's shape, use the ray only
             cand = dataclasses.replace(cand, points=np.zeros((0, 2)), ground_center=None)
             consistent = False

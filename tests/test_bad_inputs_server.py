@@ -382,6 +382,36 @@ def test_confine_path_unit(tmp_path) -> None:
             confine_path(bad, root)
 
 
+def test_confine_path_property(tmp_path_factory) -> None:
+    """Whatever the text, the result is strictly inside the root (or the text is refused)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from app.ui.security import PathRefused, confine_path
+
+    base = tmp_path_factory.mktemp("confine")
+    root = base / "runs"
+    (root / "d").mkdir(parents=True)
+    os.symlink(base, root / "up")
+    os.symlink("/etc", root / "etc")
+    parts = st.sampled_from(["runs", "d", "up", "etc", "..", ".", "~", "", "a", "passwd", "/", "//", "\\", "x\x00",
+                             str(base), str(root), "/etc", "/tmp"])
+
+    @settings(max_examples=400, deadline=None)
+    @given(st.lists(parts, max_size=6), st.booleans())
+    def check(seq, absolute):
+        text = ("/" if absolute else "") + "/".join(seq)
+        try:
+            out = confine_path(text, root)
+        except PathRefused:
+            return
+        real_root = Path(os.path.realpath(root))
+        assert out != real_root and out.is_relative_to(real_root), (text, out)
+        assert Path(os.path.realpath(out)) == out
+
+    check()
+
+
 # ----------------------------------------------------------------------------------------------
 # 9 (server side). Load world runs off the loop thread; an over-limit world is refused without
 # stalling other clients

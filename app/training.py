@@ -265,6 +265,27 @@ def _fresh_args(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> dict[str
     return args
 
 
+def compact_checkpoint(last: Path) -> bytes:
+    """ultralytics' ``last.pt`` with the optimizer's moment buffers stored as bfloat16 (float32's range,
+    so Adam's tiny second moments do not flush to zero as in float16): 30 → 18 MB for yolov8n with
+    AdamW. ``torch.optim.Optimizer.load_state_dict`` casts them back to the parameters' float32 on
+    resume; the step counters stay as they are."""
+    import io
+
+    import torch
+
+    ckpt = torch.load(str(last), map_location="cpu", weights_only=False)
+    opt = ckpt.get("optimizer")
+    if isinstance(opt, dict):
+        for st in opt.get("state", {}).values():
+            for k, v in list(st.items()):
+                if k != "step" and torch.is_tensor(v) and v.is_floating_point() and v.dtype == torch.float32:
+                    st[k] = v.to(torch.bfloat16)
+    buf = io.BytesIO()
+    torch.save(ckpt, buf)
+    return buf.getvalue()
+
+
 def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
     """Copy every epoch's resumable ``last.pt`` to ``opts.checkpoint`` (before ultralytics strips the
     optimizer from it at the end), and end the session cleanly after ``opts.session_epochs`` epochs or,
@@ -278,7 +299,7 @@ def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
             return
         last = Path(trainer.last)
         if last.is_file():
-            atomic_write_bytes(Path(opts.checkpoint), last.read_bytes())
+            atomic_write_bytes(Path(opts.checkpoint), compact_checkpoint(last))
 
     def on_fit_epoch_end(trainer) -> None:
         state["epochs"] += 1

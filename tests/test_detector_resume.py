@@ -41,6 +41,9 @@ def test_resume_continues_the_same_run_for_one_more_epoch(tmp_path: Path) -> Non
     ck = tmp_path / "model" / "detector-train.pt"
     saved = torch.load(str(ck), map_location="cpu", weights_only=False)
     assert saved["epoch"] == 0 and saved["optimizer"] is not None  # one epoch of two, resumable
+    moments = [v for st in saved["optimizer"]["state"].values() for k, v in st.items() if k != "step"]
+    assert moments and all(v.dtype == torch.bfloat16 for v in moments)  # compact, float32's range
+    assert ck.stat().st_size < 20e6
     assert first.epochs_done == 1
     rows1 = _lr_rows(tmp_path / "runs" / "train")
     assert [int(r["epoch"]) for r in rows1] == [1]

@@ -236,6 +236,14 @@ class SlamConfig:
     loop_pair_chi2: float = param(16.0, min=0.1, max=1e6, help="pairwise consistency gate of two loop candidates (χ², 3 dof)")
     loop_gate_chi2: float = param(200.0, min=0.1, max=1e9, help="loop correction vs the graph's uncertainty over the loop (χ², 3 dof)")
     loop_residual_chi2: float = param(100.0, min=0.1, max=1e9, help="a loop edge with a larger χ² after optimisation is rejected")
+    loop_ambiguity_ratio: float = param(
+        0.9, min=0.0, max=1.01, help="a loop match with a competitor scoring this fraction of it is ambiguous (>1: off)"
+    )
+    loop_ambiguity_m: float = param(1.0, min=0.05, max=20.0, unit="m", help="competitors this far from the match make it ambiguous")
+    loop_big_correction_m: float = param(
+        0.5, min=0.0, max=100.0, unit="m", help="a loop group correcting more than this needs two submaps to agree"
+    )
+    loop_big_correction_rad: float = param(0.05, min=0.0, max=3.15, unit="rad", help="same, in heading")
     optimize_every_keyframes: int = param(10, min=1, max=1000, help="optimise at most this often while loops arrive")
     optimize_iterations: int = param(5, min=1, max=100, help="Levenberg–Marquardt iterations per online optimisation")
     map_update_budget: int = param(50, min=1, max=100000, help="keyframes re-inserted into the grid per map update")

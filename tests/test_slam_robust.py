@@ -115,6 +115,14 @@ def test_false_loop_closure_is_rejected_and_a_true_one_accepted():
     assert v2.offer(f1, est, ij, z, info) == []
     assert v2.offer(f2, est, ij, z, info) == []
     assert v2.rejected_by["odometry"] == 2 and v2.rejected_count == 2
+    # the same large jump against one submap only (one corner looking like another) waits for a second
+    v5 = LoopVerifier(SlamConfig())
+    g1 = Candidate(5, 30, compose(between(truth[5], truth[30]), off), LOOP_INFO)
+    g2 = Candidate(5, 31, compose(between(truth[5], truth[31]), off), LOOP_INFO)
+    assert v5.offer(g1, est, ij, z, info) == [] and v5.offer(g2, est, ij, z, info) == []
+    assert v5.held == 1 and len(v5.pending) == 2 and not v5.accepted
+    v5.expire(31 + v5.cfg.loop_confirm_keyframes + 1)
+    assert v5.rejected_by["unconfirmed"] == 2
     # an isolated candidate that nothing confirms is rejected after loop_confirm_keyframes
     v3 = LoopVerifier(SlamConfig())
     v3.offer(Candidate(0, 20, between(truth[0], truth[20]), LOOP_INFO), est, ij, z, info)
@@ -232,3 +240,34 @@ def test_short_synthetic_corridor_run_does_not_bend():
     assert r.heading_err_max_deg <= 0.5, r
     assert r.trans_mean_m <= 0.03, r
     assert r.false_loops_accepted == 0
+
+
+def test_local_uniqueness_finds_the_twin_of_a_periodic_corridor():
+    from app.ocslam.slam.information import strip_direction
+    from app.ocslam.slam.matcher import competitor, correlative_search
+
+    # a corridor with a door recess every 3 m: a match 3 m along it looks the same
+    walls = [[-20.0, -1.0, 20.0, -1.0]]
+    for x in np.arange(-19.0, 19.0, 3.0):
+        walls += [[x, 1.0, x + 2.0, 1.0], [x + 2.0, 1.0, x + 2.0, 1.5], [x + 2.0, 1.5, x + 3.0, 1.5], [x + 3.0, 1.5, x + 3.0, 1.0]]
+    segs = np.array(walls)
+    scan = simulate_scan(Pose2(0.0, 0.0, 0.0), segs, n_beams=181, angle_min=-math.pi / 2, fov=math.pi * 181 / 180, range_max=6.0)
+    pts = scan.points()
+    # the map: every wall, densely sampled (a submap that saw the whole corridor)
+    t = np.linspace(0.0, 1.0, 200)[:, None]
+    wall_pts = np.vstack([(1 - t) * sg[:2] + t * sg[2:] for sg in segs])
+    fld = build_field(wall_pts, 0.05, 0.07, margin_m=1.0)
+    center = np.array([0.4, 0.1, 0.0])
+    best = correlative_search(fld, pts, center, 3.5, 0.1, math.radians(1.0))
+    # the best match is the true pose or one of its twins, 3 m apart: nothing tells them apart
+    assert abs(best.pose[0] - 3.0 * round(best.pose[0] / 3.0)) < 0.06 and abs(best.pose[1]) < 0.06
+    rival = competitor(fld, pts, center, 3.5, 0.1, math.radians(1.0), best.pose, 1.0, 0.9 * best.score)
+    assert rival is not None and abs(abs(rival.pose[0] - best.pose[0]) - 3.0) < 0.2 and abs(rival.pose[1]) < 0.1
+    # a window that cannot reach a twin: unique
+    near = correlative_search(fld, pts, center, 1.2, 0.1, math.radians(1.0))
+    assert np.allclose(near.pose[:2], 0.0, atol=0.06)
+    assert competitor(fld, pts, center, 1.2, 0.1, math.radians(1.0), near.pose, 1.0, 0.9 * near.score) is None
+    # the match keeps its information across the corridor and in heading, not along it
+    info = np.diag([1 / 0.05**2, 1 / 0.05**2, 1 / 0.02**2])
+    s = strip_direction(info, rival.pose[:2] - best.pose[:2], 0.05, 0.02, 1e-4)
+    assert s[0, 0] == pytest.approx(1e-4 / 0.05**2, rel=0.05) and s[1, 1] == pytest.approx(info[1, 1]) and s[2, 2] == pytest.approx(info[2, 2])

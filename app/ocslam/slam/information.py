@@ -63,6 +63,24 @@ def scan_information(
     return clamp_information(H, sigma_xy_m, sigma_yaw_rad, floor)
 
 
+def strip_direction(
+    info: NDArray[np.float64], d: NDArray[np.float64], sigma_xy_m: float, sigma_yaw_rad: float, floor: float
+) -> NDArray[np.float64]:
+    """Remove the information along the translation direction ``d`` ``(2,)`` (then floor it again).
+
+    Used when another pose, displaced along ``d``, matches almost as well (a periodic corridor: doors at
+    a regular spacing): the measurement is then trusted across ``d`` and in heading only.
+    """
+    d = np.asarray(d, np.float64).reshape(2)
+    n = float(np.hypot(d[0], d[1]))
+    if n < 1e-12:
+        return np.asarray(info, np.float64)
+    d = d / n
+    P = np.eye(3)
+    P[:2, :2] -= np.outer(d, d)
+    return clamp_information(P.T @ np.asarray(info, np.float64) @ P, sigma_xy_m, sigma_yaw_rad, floor)
+
+
 def odometry_information(delta: NDArray[np.float64], sigma_xy_per_m: float, sigma_yaw_per_rad: float, sigma_min_xy_m: float = 0.005, sigma_min_yaw_rad: float = 0.002) -> NDArray[np.float64]:
     """``(3, 3)`` diagonal information of a wheel-odometry increment ``delta`` ``(x, y, yaw)``.
 
@@ -83,4 +101,4 @@ def weakest_direction(info: NDArray[np.float64]) -> tuple[float, float, NDArray[
     return float(1.0 / math.sqrt(w[0])), float(1.0 / math.sqrt(w[1])), V[:, 0]
 
 
-__all__ = ["to_body_frame", "clamp_information", "scan_information", "odometry_information", "weakest_direction"]
+__all__ = ["to_body_frame", "clamp_information", "scan_information", "strip_direction", "odometry_information", "weakest_direction"]

@@ -15,7 +15,10 @@ Acceptance (strict): the discrete score must reach ``loop_min_score``, the conti
 keep at least ``loop_min_inliers`` of the query points within 5 cm of the submap's surfaces, and the
 refinement must not wander more than two cells from the discrete optimum. Each closure carries the
 information of its refinement (:mod:`.information`, in the keyframe's frame: loose along a corridor).
-Accepted here means *candidate*: :mod:`.verify` confirms it before the pose graph gets the edge (with a
+Local uniqueness: if another pose of the search window farther than ``loop_ambiguity_m`` scores at
+least ``loop_ambiguity_ratio`` of the best (:func:`~app.ocslam.slam.matcher.competitor`: doors at a
+regular spacing, a featureless corridor), the closure keeps no information along the direction to
+that competitor (:func:`~app.ocslam.slam.information.strip_direction`). Accepted here means *candidate*: :mod:`.verify` confirms it before the pose graph gets the edge (with a
 robust Cauchy kernel).
 """
 
@@ -29,9 +32,9 @@ from numpy.typing import NDArray
 from app.ocslam.config import SlamConfig
 from app.ocslam.se2 import between, transform_points, wrap_angle
 from app.ocslam.slam.field import MatchField, build_field
-from app.ocslam.slam.information import scan_information
+from app.ocslam.slam.information import scan_information, strip_direction
 from app.ocslam.slam.keyframes import Keyframes
-from app.ocslam.slam.matcher import correlative_search, refine
+from app.ocslam.slam.matcher import competitor, correlative_search, refine
 
 
 @dataclass
@@ -71,6 +74,7 @@ class LoopCloser:
         self.submaps: dict[int, _Submap] = {}
         self.searches = 0
         self.accepted = 0
+        self.ambiguous = 0  # candidates with a competitor (information stripped along it)
         self.travel_since_loop = 0.0  # m travelled since the last accepted loop closure
         self.log: list[tuple] = []
 
@@ -188,6 +192,18 @@ class LoopCloser:
             info = scan_information(
                 ref.hessian_line, float(ref.pose[2]), cfg.match_info_point_sigma_m, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor
             )
+            if cfg.loop_ambiguity_ratio <= 1.0:
+                rival = competitor(
+                    sm.field, query, center, win_xy, win_yaw, cfg.match_yaw_step_rad, res.pose, cfg.loop_ambiguity_m,
+                    max(cfg.loop_min_score, cfg.loop_ambiguity_ratio * res.score),
+                )
+                if rival is not None:
+                    # another place looks as good: trust the match across that direction and in heading only
+                    self.ambiguous += 1
+                    d = rival.pose[:2] - res.pose[:2]
+                    c, s_ = np.cos(ref.pose[2]), np.sin(ref.pose[2])
+                    d_body = np.array([c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]])
+                    info = strip_direction(info, d_body, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor)
             out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction, info))
         return out
 

@@ -396,6 +396,7 @@ class Slam:
             "slam_loops_pending": int(len(self.verifier.pending)),
             "slam_loops_rejected_by": rej,
             "slam_loop_candidates": int(self.loops.accepted),
+            "slam_loops_ambiguous": int(self.loops.ambiguous),
             "slam_corrections": int(self.correction_count),
         }
 

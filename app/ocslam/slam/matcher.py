@@ -143,6 +143,104 @@ def correlative_search(
     return SearchResult(pose=pose, score=best_score)
 
 
+def competitor(
+    fld: MatchField,
+    pts: NDArray[np.float64],
+    center: NDArray[np.float64],
+    window_xy_m: float,
+    window_yaw_rad: float,
+    yaw_step_rad: float,
+    best: NDArray[np.float64],
+    exclude_m: float,
+    min_score: float,
+    dives: int = 4,
+) -> SearchResult | None:
+    """A lattice pose (the same lattice as :func:`correlative_search`) farther than ``exclude_m`` from
+    ``best`` whose score reaches ``min_score``, or None: the *local uniqueness* test of a match.
+
+    Branch and bound with the bound ``min_score``; regions entirely inside the exclusion disc are
+    pruned. Greedy dives from the ``dives`` best top-level regions usually find a competitor at once
+    where there is one (a corridor, a periodic façade); the breadth-first search proves there is none.
+    """
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    if len(pts) == 0:
+        return None
+    res = fld.resolution
+    w = int(math.ceil(window_xy_m / res - 1e-9))
+    nA = int(math.floor(window_yaw_rad / yaw_step_rad + 1e-9)) if yaw_step_rad > 0 else 0
+    yaws = center[2] + np.arange(-nA, nA + 1) * yaw_step_rad
+    rows, cols = _rotated_cells(fld, pts, center[:2], yaws)
+    A = len(yaws)
+    top = 0
+    while 2 ** (top + 1) <= w and top < 8:
+        top += 1
+    fld.ensure_levels(top)
+    bi = (best[0] - center[0]) / res
+    bj = (best[1] - center[1]) / res
+    r = exclude_m / res
+
+    def outside(ox, oy, h):
+        """True where some lattice point of the region [ox, ox+2^h) × [oy, oy+2^h) is outside the disc."""
+        span = 2**h - 1
+        fx = np.maximum(np.abs(ox - bi), np.abs(ox + span - bi))
+        fy = np.maximum(np.abs(oy - bj), np.abs(oy + span - bj))
+        return fx * fx + fy * fy > r * r
+
+    def children(a, ox, oy, h):
+        half = 2 ** (h - 1)
+        da = np.array([0, half, 0, half])
+        db = np.array([0, 0, half, half])
+        ca = np.repeat(a, 4)
+        cx = (ox[:, None] + da[None, :]).ravel()
+        cy = (oy[:, None] + db[None, :]).ravel()
+        keep = (cx <= w) & (cy <= w) & outside(cx, cy, h - 1)
+        return ca[keep], cx[keep], cy[keep]
+
+    def found(a, ox, oy, sc):
+        i = int(np.argmax(sc))
+        return SearchResult(np.array([center[0] + ox[i] * res, center[1] + oy[i] * res, float(wrap_angle(yaws[a[i]]))]), float(sc[i]))
+
+    step = 2**top
+    offs = np.arange(-w, w + 1, step)
+    a, ox, oy = np.meshgrid(np.arange(A), offs, offs, indexing="ij")
+    a, ox, oy = a.ravel(), ox.ravel(), oy.ravel()
+    keep = outside(ox, oy, top)
+    a, ox, oy = a[keep], ox[keep], oy[keep]
+    h = top
+    sc = _scores(fld.pyramid[h], rows, cols, a, ox, oy)
+    if h == 0:
+        ok = sc >= min_score
+        return found(a[ok], ox[ok], oy[ok], sc[ok]) if ok.any() else None
+    # greedy dives
+    for i in np.argsort(-sc)[:dives]:
+        if sc[i] < min_score:
+            break
+        da, dx, dy = a[i : i + 1], ox[i : i + 1], oy[i : i + 1]
+        for hh in range(h, 0, -1):
+            da, dx, dy = children(da, dx, dy, hh)
+            if len(da) == 0:
+                break
+            s2 = _scores(fld.pyramid[hh - 1], rows, cols, da, dx, dy)
+            j = int(np.argmax(s2))
+            if s2[j] < min_score:
+                break
+            if hh == 1:
+                return found(da[j : j + 1], dx[j : j + 1], dy[j : j + 1], s2[j : j + 1])
+            da, dx, dy = da[j : j + 1], dx[j : j + 1], dy[j : j + 1]
+    # breadth-first, pruned by the bound
+    while True:
+        keep = sc >= min_score
+        a, ox, oy = a[keep], ox[keep], oy[keep]
+        if len(a) == 0:
+            return None
+        a, ox, oy = children(a, ox, oy, h)
+        h -= 1
+        sc = _scores(fld.pyramid[h], rows, cols, a, ox, oy)
+        if h == 0:
+            ok = sc >= min_score
+            return found(a[ok], ox[ok], oy[ok], sc[ok]) if ok.any() else None
+
+
 def score_pose(fld: MatchField, pts: NDArray[np.float64], pose: NDArray[np.float64]) -> float:
     """Mean likelihood of ``pts`` at ``pose`` (nearest cell)."""
     rows, cols = _rotated_cells(fld, pts, pose[:2], np.array([pose[2]]))

@@ -12,6 +12,9 @@ Three checks, in the order a candidate meets them (:class:`LoopVerifier`):
    candidates is accepted together; a candidate consistent with a recently accepted closure joins it
    at once; a candidate still unconfirmed ``loop_confirm_keyframes`` keyframes later is rejected
    (``unconfirmed``).
+   A group whose correction is *large* (more than ``loop_big_correction_m`` / ``_rad``) must also
+   involve at least two submaps (two anchors): one corner of a building can look like another, two
+   stretches of an old path rarely do at the same offset. Until then it waits (and may expire).
 2. **Odometry over the loop.** Before a group is accepted, the correction it asks for,
    ``e = (x_a⁻¹ ∘ x_k)⁻¹ ∘ z``, is compared with what the graph allows:
    ``χ² = eᵀ (Σ_graph + Σ_z)⁻¹ e`` where ``Σ_graph`` is the covariance of ``k`` relative to ``a`` from
@@ -29,6 +32,7 @@ reason (``rejected_by``).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass
 
@@ -103,6 +107,7 @@ class LoopVerifier:
         self.rejected: list[tuple[int, int, str]] = []
         self.rejected_by: Counter[str] = Counter()
         self.gate_chi2: list[float] = []  # χ² of every group that met the odometry gate (diagnostics)
+        self.held = 0  # times a large-correction group waited for a second submap
 
     def reject(self, c: Candidate, reason: str) -> None:
         self.rejected.append((int(c.anchor), int(c.keyframe), reason))
@@ -140,6 +145,14 @@ class LoopVerifier:
             return []
         group.append(c)
         best = max(group, key=lambda g: float(np.linalg.eigvalsh(g.info[:2, :2])[0]))
+        corr = loop_correction(poses, best)
+        big = math.hypot(corr[0], corr[1]) > cfg.loop_big_correction_m or abs(corr[2]) > cfg.loop_big_correction_rad
+        if big and len({g.anchor for g in group}) < 2:
+            # a large jump seen against one submap only (one corner can look like another): wait for a
+            # second submap to agree before bending the map
+            self.pending.append(c)
+            self.held += 1
+            return []
         chi2 = self.gate(poses, ij, z, info, best)
         self.gate_chi2.append(chi2)
         ids = {id(g) for g in group}

@@ -31,6 +31,10 @@ from pathlib import Path
 
 #: The dataset recipe of the committed model (app.dataset.DatasetOptions defaults).
 DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out {out}"
+#: The calibration renders of the committed int8 model (six training worlds and the apartment, the app's 320×240).
+CALIB_DATASET_COMMAND = (
+    "ocslam dataset --worlds 6 --per-world 15 --seed 1 --imgsz 320x240 --apartment-images 30 --val-fraction 0 --out {out}"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -55,7 +59,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--close-mosaic", type=int, default=10, help="last epochs trained without mosaic augmentation")
     p.add_argument("--no-cache", action="store_true", help="don't cache the decoded images in RAM")
-    p.add_argument("--out", type=Path, default=None, help="ONNX output (default: assets/models/detector.onnx; card beside it)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="trained float ONNX (default: assets/models/detector-float.onnx, card beside it); with --optimize: "
+                        "the int8 output (default assets/models/detector.onnx)")
     p.add_argument("--runs", type=Path, default=None, help="ultralytics run folder (default: runs/detector)")
     p.add_argument("--name", default="train", help="run name inside --runs")
     p.add_argument("--resume", action="store_true",
@@ -69,6 +75,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", type=Path, default=Path("datasets/calib"),
                    help="with --optimize: `ocslam dataset` folder of calibration renders (training worlds)")
     p.add_argument("--calib-images", type=int, default=120, help="with --optimize: calibration images used")
+    p.add_argument("--app-model", type=Path, default=Path("assets/models/detector.onnx"),
+                   help="after training: the int8 inference model made from the trained one (card beside it)")
+    p.add_argument("--no-int8", action="store_true", help="after training: leave the app's model as it is")
     p.add_argument("--static", default="224x192", help="with --optimize: static input W×H (the app's 320×240 → 224×192)")
 
 
@@ -99,8 +108,10 @@ def run(args: argparse.Namespace) -> int:
 
     opts.checkpoint = args.checkpoint or PROJECT_ROOT / "assets" / "models" / "detector-train.pt"
     opts.session_epochs = args.session_epochs
-    if args.out is not None:
-        opts.out_model = args.out
+    from app.config import PROJECT_ROOT as _ROOT
+
+    # The trained float model goes beside the app's int8 one, which is made from it afterwards.
+    opts.out_model = args.out if args.out is not None else _ROOT / "assets" / "models" / "detector-float.onnx"
     if args.runs is not None:
         opts.runs_dir = args.runs
     if args.data.is_dir() and not (args.data / "data.yaml").exists() and any(args.data.iterdir()):
@@ -127,7 +138,20 @@ def run(args: argparse.Namespace) -> int:
         f"{res.card['training']['training_time_h']:.2f} h); val precision {v['precision']}, recall {v['recall']}, "
         f"mAP50 {v['map50']}, mAP50-95 {v['map50_95']}"
     )
-    return 0
+    if args.no_int8:
+        return 0
+    calib = args.calib
+    if not (calib / "data.yaml").exists():
+        from app.dataset import DatasetOptions, build_dataset
+
+        recipe = DatasetOptions(out=calib, worlds=6, per_world=15, seed=1, imgsz=(320, 240), val_fraction=0.0,
+                                apartment_images=30)
+        recipe.command = CALIB_DATASET_COMMAND.format(out=calib)
+        print(f"no calibration renders at {calib}: rendering them ({recipe.command})")
+        build_dataset(recipe)
+    args.optimize = res.model_path
+    args.out = args.app_model
+    return _optimize(args)
 
 
 def _optimize(args: argparse.Namespace) -> int:

@@ -38,10 +38,16 @@ from app.ros2.topics import YOLO_COLUMNS
 from app.ros2.typestore import ros2_typestore
 
 FloatArray = NDArray[np.float64]
+_ZERO_COV = np.zeros(36, dtype=np.float64)
+_ZERO_COV.setflags(write=False)
+_TYPES: dict[str, Any] = {}
 
 
 def _t(name: str):
-    return ros2_typestore().types[name]
+    cls = _TYPES.get(name)
+    if cls is None:
+        cls = _TYPES[name] = ros2_typestore().types[name]
+    return cls
 
 
 # ----------------------------------------------------------------------------------------------
@@ -113,9 +119,13 @@ def pose2_to_matrix(T: Pose2) -> FloatArray:
 
 
 def transform_stamped(t: float, parent: str, child: str, T: Pose2 | FloatArray):
-    M = pose2_to_matrix(T) if isinstance(T, Pose2) else np.asarray(T, dtype=np.float64)
-    return _t("geometry_msgs/msg/TransformStamped")(header=header(t, parent), child_frame_id=child,
-                                                    transform=matrix_to_transform(M))
+    """geometry_msgs/TransformStamped of a planar ``Pose2`` (fast path) or a ``(4, 4)`` matrix."""
+    if isinstance(T, Pose2):
+        tr = _t("geometry_msgs/msg/Transform")(
+            translation=_t("geometry_msgs/msg/Vector3")(x=float(T.x), y=float(T.y), z=0.0), rotation=quat_from_yaw(T.yaw))
+    else:
+        tr = matrix_to_transform(np.asarray(T, dtype=np.float64))
+    return _t("geometry_msgs/msg/TransformStamped")(header=header(t, parent), child_frame_id=child, transform=tr)
 
 
 def tf_message(transforms: Sequence[Any]):
@@ -158,14 +168,14 @@ def scan_from_ros(msg: Any) -> LaserScan:
 def odom_to_ros(t: float, T_odom_base: Pose2, linear_x: float = 0.0, angular_z: float = 0.0,
                 frame_id: str = "odom", child_frame_id: str = "base_footprint"):
     V = _t("geometry_msgs/msg/Vector3")
-    cov = np.zeros(36, dtype=np.float64)
+    cov = _ZERO_COV
     return _t("nav_msgs/msg/Odometry")(
         header=header(t, frame_id),
         child_frame_id=child_frame_id,
         pose=_t("geometry_msgs/msg/PoseWithCovariance")(pose=pose_to_ros(T_odom_base), covariance=cov),
         twist=_t("geometry_msgs/msg/TwistWithCovariance")(
             twist=_t("geometry_msgs/msg/Twist")(linear=V(x=float(linear_x), y=0.0, z=0.0), angular=V(x=0.0, y=0.0, z=float(angular_z))),
-            covariance=cov.copy(),
+            covariance=cov,
         ),
     )
 

@@ -17,7 +17,10 @@ Topics, types and frames: :mod:`app.ros2.topics`. Example::
 
 from __future__ import annotations
 
+import copy
 import logging
+import queue
+import threading
 import time
 from collections import deque
 from pathlib import Path
@@ -82,19 +85,45 @@ class BagRecorder:
         self._snap: Any = None
         self._frames: deque | None = None  # (log time, frame, detections future) handed to the detector
         self._unhook: Any = None
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._batch: list = []
+        self._thread: threading.Thread | None = None
+        self.errors = 0  # messages that could not be written
         self._next_map = 0.0
         self._next_cmd = 0.0
 
     # -- writing -----------------------------------------------------------------------------------
-    def _write(self, topic: str, msg: Any, t_log: float) -> None:
-        conn = self._conns.get(topic)
-        if conn is None:
-            msgtype = topics.RECORDED_TOPICS[topic]
-            conn = self.writer.add_connection(topic, msgtype, typestore=self.store,
-                                              offered_qos_profiles=_qos(topic in topics.LATCHED_TOPICS))
-            self._conns[topic] = conn
-        self.writer.write(conn, convert.to_ns(t_log), self.store.serialize_cdr(msg, msg.__msgtype__))
-        self.counts[topic] = self.counts.get(topic, 0) + 1
+    def _write(self, topic: str, build: Any, t_log: float) -> None:
+        """Queue one message: ``build()`` makes it, on the writer thread (conversion, CDR and MCAP cost the
+        loop nothing but this call); everything ``build`` reads must not change afterwards."""
+        self._batch.append((topic, build, t_log))
+
+    def _flush(self) -> None:
+        if self._batch:
+            self._queue.put(self._batch)  # one hand-over per batch: fewer GIL switches for the loop
+            self._batch = []
+
+    def _writer_loop(self) -> None:
+        while True:
+            batch = self._queue.get()
+            if batch is None:
+                return
+            for item in batch:
+                self._write_now(*item)
+
+    def _write_now(self, topic: str, build: Any, t_log: float) -> None:
+        try:
+            msg = build()
+            conn = self._conns.get(topic)
+            if conn is None:
+                conn = self.writer.add_connection(topic, topics.RECORDED_TOPICS[topic], typestore=self.store,
+                                                  offered_qos_profiles=_qos(topic in topics.LATCHED_TOPICS))
+                self._conns[topic] = conn
+            self.writer.write(conn, convert.to_ns(t_log), self.store.serialize_cdr(msg, msg.__msgtype__))
+            self.counts[topic] = self.counts.get(topic, 0) + 1
+        except Exception:  # one bad message never stops the recording
+            log.exception("bag recorder: a %s message was not written", topic)
+            self.errors += 1
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def start(self, pipe: "Pipeline") -> "BagRecorder":
@@ -110,12 +139,14 @@ class BagRecorder:
             raise RecordError(f"cannot create bag {self.path}: {e}") from None
         self._open = True
         t = pipe.time
+        self._thread = threading.Thread(target=self._writer_loop, name="ocslam-bag-writer", daemon=True)
+        self._thread.start()
         tfs = [convert.transform_stamped(t, p, c, T) for p, c, T in static_transforms(pipe.robot_model)]
-        self._write(topics.TF_STATIC, convert.tf_message(tfs), t)
+        self._write(topics.TF_STATIC, lambda: convert.tf_message(tfs), t)
         try:
             objs, obst = convert.ground_truth_to_ros(pipe.truth_objects_map(), pipe.truth_obstacles_map(), t)
-            self._write(topics.GT_OBJECTS, objs, t)
-            self._write(topics.GT_FOOTPRINTS, obst, t)
+            self._write(topics.GT_OBJECTS, lambda: objs, t)
+            self._write(topics.GT_FOOTPRINTS, lambda: obst, t)
         except Exception as e:  # a world without ground truth still records
             log.warning("ground truth not recorded: %s", e)
         self._next_map = t + self.map_period
@@ -136,27 +167,33 @@ class BagRecorder:
         if latest is not None and latest[0] > self._last_odom:
             stamp, T = latest
             self._last_odom = stamp
-            o = pipe.odometry
-            self._write(topics.ODOM, convert.odom_to_ros(stamp, T, o.linear_x, o.angular_z), t)
-            self._write(topics.TF, convert.tf_message([convert.transform_stamped(stamp, "odom", "base_footprint", T)]), t)
+            v, w = pipe.odometry.linear_x, pipe.odometry.angular_z
+            self._write(topics.ODOM, lambda: convert.odom_to_ros(stamp, T, v, w), t)
+            self._write(topics.TF, lambda: convert.tf_message(
+                [convert.transform_stamped(stamp, "odom", "base_footprint", T)]), t)
         if self._scans is None:
             self._scans = pipe.counters.scans  # scans before the recording started are not written
         if pipe.counters.scans != self._scans and pipe.last_scan is not None:
             self._scans = pipe.counters.scans
             scan = pipe.last_scan
-            self._write(topics.SCAN, convert.scan_to_ros(scan), t)
-            self._write(topics.EXACT_RANGES, convert.exact_ranges_to_ros(scan), t)
+            self._write(topics.SCAN, lambda: convert.scan_to_ros(scan), t)
+            self._write(topics.EXACT_RANGES, lambda: convert.exact_ranges_to_ros(scan), t)
             # map → odom as the loop publishes it now (a scan's own correction is published a period later)
-            self._write(topics.TF, convert.tf_message([convert.transform_stamped(t, "map", "odom", pipe.T_map_odom)]), t)
+            T_mo = pipe.T_map_odom
+            self._write(topics.TF, lambda: convert.tf_message([convert.transform_stamped(t, "map", "odom", T_mo)]), t)
             if pipe.truth_log and abs(pipe.truth_log[-1][0] - scan.stamp) < 1e-9:
-                self._write(topics.GT_POSE, convert.pose_stamped(scan.stamp, "map", pipe.truth_log[-1][1]), t)
+                T_true = pipe.truth_log[-1][1]
+                self._write(topics.GT_POSE, lambda: convert.pose_stamped(scan.stamp, "map", T_true), t)
         self._observe_camera(pipe, t)
         if t + 1e-9 >= self._next_cmd and pipe.drive_mode != "idle":
             self._next_cmd = t + self.cmd_period
-            self._write(topics.CMD_VEL, convert.twist_to_ros(pipe.cmd), t)
+            cmd = pipe.cmd
+            self._write(topics.CMD_VEL, lambda: convert.twist_to_ros(cmd), t)
         if t + 1e-9 >= self._next_map:
             self._next_map += self.map_period * max(1, int((t - self._next_map) / self.map_period) + 1)
             self._write_results(pipe, t)
+        if len(self._batch) >= 256:
+            self._flush()
         self.wall_s += time.perf_counter() - t0
 
     def _hook_detector(self, pipe: "Pipeline") -> bool:
@@ -199,24 +236,40 @@ class BagRecorder:
             info = pipe.camera_model.info
             if (info.width, info.height) != (img.width, img.height):
                 info = info.scaled(img.width, img.height)
-            self._write(topics.IMAGE_COMPRESSED,
-                        convert.image_to_compressed(_stamped(img, dets.stamp), self.jpeg_quality, self.image_format), t_log)
-            self._write(topics.CAMERA_INFO, convert.camera_info_to_ros(info, dets.stamp), t_log)
-        self._write(topics.YOLO_BOXES, convert.yolo_boxes_to_ros(dets), t_log)
-        self._write(topics.EXACT_BOXES, convert.exact_boxes_to_ros(dets), t_log)
+            fmt, q = self.image_format, self.jpeg_quality
+            self._write(topics.IMAGE_COMPRESSED, lambda: convert.image_to_compressed(_stamped(img, dets.stamp), q, fmt), t_log)
+            self._write(topics.CAMERA_INFO, lambda: convert.camera_info_to_ros(info, dets.stamp), t_log)
+        self._write(topics.YOLO_BOXES, lambda: convert.yolo_boxes_to_ros(dets), t_log)
+        self._write(topics.EXACT_BOXES, lambda: convert.exact_boxes_to_ros(dets), t_log)
 
     def _write_results(self, pipe: "Pipeline", t: float) -> None:
-        """``/map``, ``/objects``, ``/objects/markers`` and ``/slam/pose_graph`` at ``t``."""
+        """``/map``, ``/objects``, ``/objects/markers`` and ``/slam/pose_graph`` at ``t``: taken on the
+        estimator thread after the jobs already queued (``pipe.jobs.estimate``), so the loop never waits
+        and the state is the one a sequential run has at ``t``."""
+        estimate = getattr(getattr(pipe, "jobs", None), "estimate", None)
+        if estimate is None:
+            self._results_job(pipe, t, direct=True)
+        else:
+            estimate(self._results_job, pipe, t)
+
+    def _results_job(self, pipe: "Pipeline", t: float, direct: bool = False) -> None:
+        out: list = []
         if pipe.cfg.slam.enabled:
-            grid = pipe.slam.occupancy_grid()
+            slam = pipe.slam  # on the estimator thread: no wait
+            grid = slam.occupancy_grid()
             if grid.width and grid.height:
-                self._write(topics.MAP, convert.grid_to_ros(grid, t), t)
-            self._write(topics.POSE_GRAPH, convert.pose_graph_markers(pipe.slam.pose_graph(), t), t)
+                out.append((topics.MAP, lambda: convert.grid_to_ros(grid, t), t))
+            graph = slam.pose_graph()
+            out.append((topics.POSE_GRAPH, lambda: convert.pose_graph_markers(graph, t), t))
         if pipe.detector is not None:
-            objs = pipe.objects_in_map()
+            objs = [copy.copy(o) for o in pipe.objects_in_map()]
             thr = pipe.cfg.consciousness.presence_threshold
-            self._write(topics.OBJECTS, convert.objects_to_ros(objs, t), t)
-            self._write(topics.OBJECT_MARKERS, convert.object_markers([o for o in objs if o.presence >= thr], t), t)
+            out.append((topics.OBJECTS, lambda: convert.objects_to_ros(objs, t), t))
+            out.append((topics.OBJECT_MARKERS, lambda: convert.object_markers([o for o in objs if o.presence >= thr], t), t))
+        if direct:
+            self._batch.extend(out)
+        else:
+            self._queue.put(out)
 
     def close(self, pipe: "Pipeline | None" = None) -> Path:
         """Write the final map, objects and graph (if ``pipe``) and finish the bag (``metadata.yaml``)."""
@@ -229,12 +282,19 @@ class BagRecorder:
                 if wait is not None:
                     wait()  # the detector's and the fusion's last frames
                 self.observe(pipe)
+                self._flush()
                 self._write_results(pipe, pipe.time)
+                if wait is not None:
+                    wait()
         finally:
             if self._unhook is not None:
                 self._unhook()
-            self.writer.close()
             self._open = False
+            self._flush()
+            if self._thread is not None:
+                self._queue.put(None)
+                self._thread.join()
+            self.writer.close()
             self.wall_s += time.perf_counter() - t0
         return self.path
 

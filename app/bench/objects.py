@@ -301,7 +301,7 @@ def run(args: argparse.Namespace) -> int:
                     for i in range(args.worlds)]
             label = f"{args.worlds} random worlds (rooms)"
         t0 = time.perf_counter()
-        per_world = run_jobs(cfg, jobs, args.duration, workers=max(1, int(args.workers)), quiet=args.json)
+        per_world = run_jobs(cfg, jobs, args.duration, workers=max(1, int(args.workers)))  # progress on stderr
         summary = summarize(per_world)
         out = {"suite": label, "mode": cfg.consciousness.mode, "detector": cfg.detector.kind, "sim_seed": cfg.sim.seed,
                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "command": command,

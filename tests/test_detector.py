@@ -202,3 +202,10 @@ def test_detector_reuses_its_input_tensor_across_image_sizes() -> None:
     det.detect(Image(0.0, np.full((300, 300, 3), 255, np.uint8)))  # another shape in between (side padding)
     out2, _ = det.infer(img)
     np.testing.assert_array_equal(out1, out2)  # same image, same output: no stale pixels or padding
+
+
+def test_decode_ignores_infinite_scores() -> None:
+    out = make_output([(50, 50, 20, 20, 3, 0.9), (150, 150, 20, 20, 2, 0.8)])
+    out[0, 4 + 2, 1] = np.inf
+    boxes, scores, cls = decode_output(out, NC, 0.4, 0.5, IDENTITY, 224, 224)
+    assert cls.tolist() == [3] and np.all(np.isfinite(scores))

@@ -157,7 +157,7 @@ def decode_output(
         raise DetectorError(f"expected a [1, {4 + num_classes}, N] output, got {np.asarray(output).shape}")
     scores_all = out[4:]
     best = scores_all.max(axis=0)  # NaN propagates and fails the threshold below
-    keep = np.flatnonzero(best >= confidence)
+    keep = np.flatnonzero((best >= confidence) & np.isfinite(best))
     if keep.size == 0:
         return np.zeros((0, 4)), np.zeros(0), np.zeros(0, dtype=np.int64)
     sel = out[:, keep]  # only the anchors above the threshold are decoded

@@ -8,7 +8,7 @@ world, until ``--sim-hours`` of sim time in all. Reported:
 
 * **exceptions** (goal 0): uncaught exceptions out of ``Pipeline.step`` (the world is then abandoned)
   plus the errors the loop caught and counted itself (``counters.errors``: detector, SLAM, render…);
-* **RSS** of this process and its children (the render worker) in MiB: at start (after the first
+* **RSS** of this process alone ("main") and with its children (the render worker) in MiB: at start (after the first
   world's first ``--warmup`` sim seconds, so the model and the first map are loaded), at the same point
   in every later world, and at the end; growth = last / first − 1 (goal < 10 %);
 * per world: tracked objects against the objects in the world, keyframes, the frame-skip counters,
@@ -41,8 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true")
 
 
-def rss_mib(pid: int | None = None) -> float:
-    """Resident set size of ``pid`` (default: this process) plus all its descendants, MiB (Linux /proc)."""
+def rss_mib(pid: int | None = None, *, children: bool = True) -> float:
+    """Resident set size of ``pid`` (default: this process) plus all its descendants (unless
+    ``children=False``), MiB (Linux /proc)."""
     pid = os.getpid() if pid is None else pid
     total = 0
     stack, seen = [pid], set()
@@ -56,6 +57,8 @@ def rss_mib(pid: int | None = None) -> float:
                 if line.startswith("VmRSS:"):
                     total += int(line.split()[1]) * 1024
                     break
+            if not children:
+                break
             for task in Path(f"/proc/{p}/task").iterdir():
                 kids = (task / "children").read_text().split()
                 stack.extend(int(k) for k in kids)
@@ -81,7 +84,7 @@ def soak_world(cfg, seed: int, *, sim_budget_s: float, warmup_s: float, deadline
         if pipe.detector_error and cfg.detector.kind != "none":
             raise RuntimeError(pipe.detector_error)
         pipe.explore()
-        rss_warm = None
+        rss_warm = rss_warm_main = None
         end = "world time budget"
         while pipe.time < sim_budget_s:
             try:
@@ -93,6 +96,7 @@ def soak_world(cfg, seed: int, *, sim_budget_s: float, warmup_s: float, deadline
                 break
             if rss_warm is None and pipe.time >= warmup_s:
                 rss_warm = rss_mib()
+                rss_warm_main = rss_mib(children=False)
             if pipe.drive_mode == "idle" and pipe.nav_status:
                 end = pipe.nav_status
                 break
@@ -108,6 +112,8 @@ def soak_world(cfg, seed: int, *, sim_budget_s: float, warmup_s: float, deadline
             "end": end,
             "rss_warm_mib": round(rss_warm, 1) if rss_warm is not None else None,
             "rss_end_mib": round(rss_mib(), 1),
+            "rss_warm_main_mib": round(rss_warm_main, 1) if rss_warm_main is not None else None,
+            "rss_end_main_mib": round(rss_mib(children=False), 1),
             "tracked_objects": len(pipe.consciousness.objects),
             "objects_in_map": len(pipe.objects_in_map()),
             "keyframes": len(pipe.slam.pose_graph().nodes),
@@ -161,6 +167,7 @@ def soak(cfg, *, sim_hours: float, world_minutes: float, warmup_s: float, seed0:
 def _summarise(result: dict[str, Any], done_s: float, wall_s: float, target: float) -> None:
     ws = result["worlds"]
     warm = [w["rss_warm_mib"] for w in ws if w.get("rss_warm_mib") is not None]
+    main = [w["rss_warm_main_mib"] for w in ws if w.get("rss_warm_main_mib") is not None]
     result.update({
         "sim_s": round(done_s, 1),
         "sim_hours": round(done_s / 3600.0, 3),
@@ -174,6 +181,10 @@ def _summarise(result: dict[str, Any], done_s: float, wall_s: float, target: flo
         "rss_last_warm_mib": warm[-1] if warm else None,
         "rss_growth_pct": round(100.0 * (warm[-1] / warm[0] - 1.0), 2) if len(warm) >= 2 else None,
         "rss_max_mib": max((w.get("rss_end_mib") or 0.0 for w in ws), default=None),
+        "rss_main_start_mib": main[0] if main else None,
+        "rss_main_last_warm_mib": main[-1] if main else None,
+        "rss_main_growth_pct": round(100.0 * (main[-1] / main[0] - 1.0), 2) if len(main) >= 2 else None,
+        "rss_main_end_mib": ws[-1].get("rss_end_main_mib") if ws else None,
         "skipped_frames": _merge([w.get("skipped_frames", {}) for w in ws]),
         "slam_skipped": _merge([w.get("slam_skipped", {}) for w in ws]),
     })
@@ -210,6 +221,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"exceptions: {res['exceptions']} uncaught + {res['loop_errors']} caught (goal 0)")
     print(f"RSS: {res['rss_start_mib']} MiB at start → {res['rss_last_warm_mib']} MiB at the same point of the last world "
           f"({res['rss_growth_pct']} %, goal < 10 %); {res['rss_end_mib']} MiB at the end")
+    print(f"RSS of the loop process alone: {res['rss_main_start_mib']} → {res['rss_main_last_warm_mib']} MiB "
+          f"({res['rss_main_growth_pct']} %); {res['rss_main_end_mib']} MiB at the end")
     print(f"frame skips: {res['skipped_frames']}; SLAM skips: {res['slam_skipped']}")
     if not res["complete"]:
         print("incomplete: stopped by --max-wall-minutes before --sim-hours of sim time")

@@ -42,14 +42,19 @@ def test_20s_headless_run_writes_config_and_summary(tmp_path: Path) -> None:
 def test_ctrl_c_ends_cleanly_and_still_writes_the_summary(tmp_path: Path) -> None:
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app", "run", "--headless", "--detector", "none", "--duration", "600", "--quiet",
+        [sys.executable, "-m", "app", "run", "--headless", "--detector", "none", "--duration", "600",
          "--out", str(tmp_path)],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env,
     )
     try:
-        deadline = time.time() + 120
-        while not (tmp_path / "config.yaml").exists() and time.time() < deadline:
-            time.sleep(0.2)
+        # the run directory is written as a unit at the end: wait for the progress bar (the loop runs)
+        import select
+
+        seen, deadline = b"", time.time() + 120
+        while b"sim s" not in seen and time.time() < deadline and proc.poll() is None:
+            if select.select([proc.stdout], [], [], 0.5)[0]:
+                seen += os.read(proc.stdout.fileno(), 4096)
+        assert not (tmp_path / "summary.json").exists()  # nothing written before the end
         time.sleep(4.0)  # let it drive a little
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=120)
@@ -59,3 +64,4 @@ def test_ctrl_c_ends_cleanly_and_still_writes_the_summary(tmp_path: Path) -> Non
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["end_reason"] == "interrupted"
     assert 0 < summary["sim_time_s"] < 600
+    assert sorted(p.name for p in tmp_path.parent.iterdir() if p.name.startswith(f".{tmp_path.name}.")) == []

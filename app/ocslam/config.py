@@ -361,6 +361,12 @@ class ConsciousnessConfig:
         help="improved: a leg island farther than this from every corner of its group's rectangle is not one of its legs (0: off)",
         live=True,
     )
+    presence_confidence: str = param(
+        "latest",
+        choices=("latest", "mean", "best"),
+        help="improved: Y_c of the soft decision: the new box's confidence (the paper), the mean or the best of the object's counted frames",
+        live=True,
+    )
     shared_evidence_fraction: float = param(
         0.5, min=0.0, max=1.0, step=0.05,
         help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",

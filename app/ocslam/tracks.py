@@ -54,6 +54,22 @@ class Track:
     complete_views: int = 0  # observations through boxes not cut by the image border
     misses: int = 0  # frames in clear view (in range, not occluded) without a box of its class
     boxes: dict[float, int] = field(default_factory=dict)  # recent frames (stamp → box index) it was seen in
+    conf_sum: float = 0.0  # confidences of the frames that counted (presence_confidence = mean / best)
+    conf_n: int = 0
+    conf_best: float = 0.0
+
+    def frame_confidence(self, c: float, cfg: ConsciousnessConfig) -> float:
+        """``Y_c`` of the soft decision for a new frame with box confidence ``c``: the box's own
+        (``latest``, the paper), the mean over the object's counted frames, or the best of them."""
+        self.conf_sum += float(c)
+        self.conf_n += 1
+        self.conf_best = max(self.conf_best, float(c))
+        mode = str(getattr(cfg, "presence_confidence", "latest"))
+        if mode == "mean":
+            return self.conf_sum / self.conf_n
+        if mode == "best":
+            return self.conf_best
+        return float(c)
 
     def saw(self, stamp: float, box: int, keep: int = 256) -> None:
         self.boxes[stamp] = box
@@ -183,7 +199,7 @@ def credit_track(
 ) -> None:
     """A box that saw ``t`` without giving points: a presence frame and a bisector ray."""
     if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
-        t.presence, t.frames = update_presence(t.presence, t.frames, sight.confidence, cfg.frames_for_presence)
+        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(sight.confidence, cfg), cfg.frames_for_presence)
         t.last_frame_stamp = stamp
     t.evidence.add_ray(sight.apex, sight.direction, sight.weight, sight.kf, decay=float(cfg.rolling_average_weight))
     t.touched_stamp = stamp
@@ -232,6 +248,7 @@ def create_track(
         touched_stamp=stamp,
     )
     t.saw(stamp, cand.area_index)
+    t.frame_confidence(cand.confidence, cfg)
     t.complete_views = int(cand.ray_weight > 0.0)
     t.refresh(known_free)
     if t.footprint is None:
@@ -260,7 +277,7 @@ def update_track(
     if cand.source == "lidar_legs" or (cand.source == "lidar_island" and t.source == "ground_plane"):
         t.source = cand.source
     if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
-        t.presence, t.frames = update_presence(t.presence, t.frames, cand.confidence, cfg.frames_for_presence)
+        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(cand.confidence, cfg), cfg.frames_for_presence)
         t.last_frame_stamp = stamp
     t.touched_stamp = stamp
     t.saw(stamp, cand.area_index)

@@ -37,6 +37,7 @@ BENCHES: dict[str, tuple[str, str]] = {
     "objects": ("app.bench.objects", "the object map against ground truth (the paper's results table)"),
     "ui": ("app.bench.ui", "server CPU and bytes per tick per client"),
     "loop": ("app.bench.loop", "the complete loop's per-stage time and real-time factor"),
+    "ros2": ("app.bench.ros2", "ROS 2 bags: recording cost, replay time and reproduction of the live run"),
     "soak": ("app.bench.soak", "hours of headless exploration over random worlds: exceptions, RSS growth, counts"),
 }
 

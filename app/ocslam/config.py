@@ -233,7 +233,7 @@ class SlamConfig:
     odom_sigma_yaw_per_rad: float = param(0.2, min=0.0, max=10.0, help="odometry yaw σ growth per radian turned")
     loop_cluster_min: int = param(2, min=1, max=100, help="loop closures accepted only in mutually consistent groups this large")
     loop_confirm_keyframes: int = param(25, min=1, max=100000, help="a loop candidate not confirmed within this many keyframes is rejected")
-    loop_pair_chi2: float = param(16.0, min=0.1, max=1e6, help="pairwise consistency gate of two loop candidates (χ², 3 dof)")
+    loop_pair_chi2: float = param(25.0, min=0.1, max=1e6, help="pairwise consistency gate of two loop candidates (χ², 3 dof)")
     loop_gate_chi2: float = param(200.0, min=0.1, max=1e9, help="loop correction vs the graph's uncertainty over the loop (χ², 3 dof)")
     loop_residual_chi2: float = param(100.0, min=0.1, max=1e9, help="a loop edge with a larger χ² after optimisation is rejected")
     loop_ambiguity_ratio: float = param(

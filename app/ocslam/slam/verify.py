@@ -6,9 +6,9 @@ Three checks, in the order a candidate meets them (:class:`LoopVerifier`):
    matcher is held *pending*. Two candidates ``(a₁ → k₁, z₁)``, ``(a₂ → k₂, z₂)`` are consistent when the
    cycle they close with the current graph is near the identity: the loops place ``k₁`` and ``k₂`` at
    ``x_a₁ ∘ z₁`` and ``x_a₂ ∘ z₂``; their relative pose must agree with the tracked ``x_k₁⁻¹ ∘ x_k₂``
-   (a short stretch of odometry and scan matching) within ``loop_pair_chi2``, with the covariance of
-   both measurements (their information inverted: a corridor loop is loose along the corridor) plus
-   a term growing with the keyframe distance. A group of ``loop_cluster_min`` mutually consistent
+   (a short stretch of odometry and scan matching) within ``loop_pair_chi2``, under the pair's combined
+   precision (:func:`pair_chi2`: a loop loose along a corridor cannot confirm another's position along
+   it) plus a term growing with the keyframe distance. A group of ``loop_cluster_min`` mutually consistent
    candidates is accepted together; a candidate consistent with a recently accepted closure joins it
    at once; a candidate still unconfirmed ``loop_confirm_keyframes`` keyframes later is rejected
    (``unconfirmed``).
@@ -82,11 +82,17 @@ def cycle_error(poses: NDArray[np.float64], c1: Candidate, c2: Candidate) -> NDA
 
 
 def pair_chi2(poses: NDArray[np.float64], c1: Candidate, c2: Candidate, sigma_per_kf_xy: float = 0.01, sigma_per_kf_yaw: float = 0.002) -> float:
-    """χ² of :func:`cycle_error` under both measurements' covariances plus a keyframe-distance term."""
+    """χ² of :func:`cycle_error` under the pair's *combined* precision plus a keyframe-distance term.
+
+    The covariance is ``2 (Ω₁ + Ω₂)⁻¹``: in a direction where either candidate is firm the pair must
+    agree to that precision, so a candidate that is loose along a corridor (its information stripped
+    there) cannot vouch for another's position along it; two loose ones agree trivially there, and
+    carry no information there either.
+    """
     e = cycle_error(poses, c1, c2)
     n = abs(c1.keyframe - c2.keyframe) + abs(c1.anchor - c2.anchor)
     track = np.diag([(sigma_per_kf_xy * n) ** 2, (sigma_per_kf_xy * n) ** 2, (sigma_per_kf_yaw * n) ** 2])
-    cov = _safe_inv(c1.info) + _safe_inv(c2.info) + track + np.diag([1e-6, 1e-6, 1e-8])
+    cov = 2.0 * _safe_inv(c1.info + c2.info) + track + np.diag([1e-6, 1e-6, 1e-8])
     return _chi2(e, cov)
 
 

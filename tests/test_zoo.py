@@ -181,41 +181,43 @@ def test_image_columns_known_answer():
 def test_every_miss_gets_its_cause_on_a_synthetic_run():
     """Camera at the origin facing +x. Known answers: a door behind the camera is never in view, a
     gnome is never boxed, the flowers' box has no LIDAR return, the chair's points went into the
-    table's object, the person's object stayed below the threshold and the dog's track was lost."""
-    names = ["door", "gnome", "flowers", "chair", "table", "person", "dog"]
+    table's object, the ball's object stands 0.6 m off, the person's object stayed below the threshold
+    and the dog's track was lost."""
+    names = ["door", "gnome", "flowers", "chair", "table", "person", "dog", "ball"]
     spec = {"door": (-2.0, 0.0, 0.3, 1.0), "gnome": (2.0, 0.6, 0.25, 0.3), "flowers": (2.5, -0.6, 0.2, 0.2),
             "chair": (3.0, 0.0, 0.5, 0.5), "table": (3.0, 1.2, 1.0, 1.0), "person": (3.5, -1.0, 0.3, 0.6),
-            "dog": (2.2, -0.25, 0.25, 0.25)}
+            "dog": (2.2, -0.25, 0.25, 0.25), "ball": (3.5, -1.6, 0.22, 0.22)}
     truth = [GroundTruthObject(i, n, Pose2(spec[n][0], spec[n][1], 0.0), _rect(*spec[n]), 0.0, 1.0, name=n)
              for i, n in enumerate(names)]
     pose = np.array([0.0, 0.0, 0.0])
     fx, cx, width = 277.0, 160.0, 320
     iv = in_view_matrix(pose[None], [t.footprint for t in truth], [None] * len(truth), 1.04)[0]
-    assert iv.tolist() == [False, True, True, True, True, True, True]
+    assert iv.tolist() == [False, True, True, True, True, True, True, True]
     boxes = []
     for t in truth[2:]:
         u0, u1 = image_columns(pose, t.footprint, fx, cx, width)
         boxes.append((t.label, u0 - 2.0, u1 + 2.0))
-    scan = np.vstack([_rect(*spec[n])[:2] for n in ("chair", "table", "person", "dog")])  # returns on their near faces
+    scan = np.vstack([_rect(*spec[n])[:2] for n in ("chair", "table", "person", "dog", "ball")])  # returns on their near faces
     log = ObservationLog(len(truth))
     for _ in range(3):
         log.add_frame(pose, truth, iv, boxes, fx, cx, width, scan)
-    assert log.in_view.tolist() == [0, 3, 3, 3, 3, 3, 3]
-    assert log.detected.tolist() == [0, 0, 3, 3, 3, 3, 3]
-    assert log.lidar.tolist() == [0, 0, 0, 3, 3, 3, 3]
+    assert log.in_view.tolist() == [0, 3, 3, 3, 3, 3, 3, 3]
+    assert log.detected.tolist() == [0, 0, 3, 3, 3, 3, 3, 3]
+    assert log.lidar.tolist() == [0, 0, 0, 3, 3, 3, 3, 3]
     tracked = [
         TrackedObject(1, "table", Pose2(3.0, 0.8, 0.0), 1.0, 1.8, presence=0.95, footprint=_rect(3.0, 0.7, 1.0, 1.8)),
         TrackedObject(2, "person", Pose2(3.55, -1.0, 0.0), 0.3, 0.6, presence=0.5),
         TrackedObject(3, "dog", Pose2(0.5, 2.5, 0.0), 0.3, 0.6, presence=0.3),  # far from the dog: not its track
+        TrackedObject(4, "ball", Pose2(4.1, -1.6, 0.0), 0.2, 0.2, presence=0.9),  # 0.6 m off the ball: a false ball
     ]
     report = evaluate_objects(tracked, truth, presence_threshold=0.8)
-    assert report.tp == 1 and report.fn == 6
+    assert report.tp == 1 and report.fn == 7 and report.fp_other == 1
     counts = explain_misses(report, truth, tracked, log, presence_threshold=0.8)
     causes = {r["name"]: r["cause"] for r in report.rows if r["kind"] == "truth"}
     assert causes == {"door": "never_in_view", "gnome": "never_detected", "flowers": "no_lidar_support", "chair": "merged",
-                      "table": "tp", "person": "below_threshold", "dog": "lost"}
-    assert counts == {"never_in_view": 1, "never_detected": 1, "no_lidar_support": 1, "merged": 1, "below_threshold": 1,
-                      "lost": 1}
+                      "table": "tp", "person": "below_threshold", "dog": "lost", "ball": "mislocated"}
+    assert counts == {"never_in_view": 1, "never_detected": 1, "no_lidar_support": 1, "merged": 1, "mislocated": 1,
+                      "below_threshold": 1, "lost": 1}
     assert set(counts) == set(MISS_CAUSES)
     chair_row = next(r for r in report.rows if r["name"] == "chair")
     assert "table #1 (table)" in chair_row["miss_detail"]

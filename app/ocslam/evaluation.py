@@ -20,7 +20,8 @@ False negatives by cause (:func:`explain_misses`, :data:`MISS_CAUSES`), the firs
 pipeline's order: ``never_in_view`` (no camera pose of the run had it in the field of view, unoccluded,
 within range: :func:`in_view_matrix`), ``never_detected`` (in view, but no box of its class covered its
 image columns), ``no_lidar_support`` (boxed, but never a LIDAR return on it inside such a box),
-``merged`` (a shown object that stands for another true object, or a false positive, lies on it),
+``merged`` (a shown object that stands for another true object, or one of another class, lies on it),
+``mislocated`` (an unmatched shown object of its class stands within twice the match radius),
 ``below_threshold`` (an object of its class is tracked there with presence below the threshold),
 ``lost`` (none of these: nothing of its class near it in the final map). The evidence per frame is
 gathered by an :class:`ObservationLog` from ground truth on the evaluation's side only.
@@ -254,7 +255,8 @@ MISS_CAUSES: tuple[str, ...] = (
     "never_in_view",  # no camera pose of the run had it in the field of view, unoccluded, in range
     "never_detected",  # in view, but no box of its class covered its image columns
     "no_lidar_support",  # detected, but no LIDAR return on it inside any such box
-    "merged",  # a shown object of another true object (or a false positive) lies on it
+    "merged",  # a shown object that stands for another true object, or is of another class, lies on it
+    "mislocated",  # an unmatched object of its class is there, beyond the match radius of its centre
     "below_threshold",  # a tracked object of its class is there, with presence below the threshold
     "lost",  # seen, detected and supported, yet no tracked object of its class near it at the end
 )
@@ -461,9 +463,17 @@ def explain_misses(
             same = [o for o in tracked if o.label == t.label and o.id not in shown_ids and (
                 float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])) <= match_radius_m
                 or (poly is not None and poly.covers(Point(o.pose.x, o.pose.y))))]
-            if on_it:
-                o = min(on_it, key=lambda o: float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])))
+            matched_ids = {int(r["object_id"]) for r in truth_rows if r.get("matched") and r.get("object_id") is not None}
+            merged = [o for o in on_it if o.label != t.label or o.id in matched_ids]
+            astray = [o for o in tracked if o.id in shown_ids and o.label == t.label and o.id not in matched_ids
+                      and float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])) <= 2 * match_radius_m]
+            dist = lambda o: float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1]))  # noqa: E731
+            if merged:
+                o = min(merged, key=dist)
                 cause, detail = "merged", f"into {o.label} #{o.id} ({owner.get(o.id, 'unmatched')})"
+            elif astray:
+                o = min(astray, key=dist)
+                cause, detail = "mislocated", f"{o.label} #{o.id} {dist(o):.2f} m from its centre"
             elif same:
                 o = max(same, key=lambda o: o.presence)
                 cause, detail = "below_threshold", f"{o.label} #{o.id} at presence {o.presence:.2f}"

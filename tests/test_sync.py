@@ -34,6 +34,16 @@ def test_scan_buffer_nearest_within_tolerance() -> None:
     assert b.nearest(0.9, 0.1) is None
 
 
+def test_scan_buffer_gap_equal_to_tolerance_survives_rounding() -> None:
+    """A camera stamped half a LIDAR period after a scan: 0.30000000000000004 - 0.2 > 0.1 in floats."""
+    b = ScanBuffer()
+    b.add(circle_scan(1.0, 0.2))
+    image_stamp = 0.1 + 0.2  # 0.30000000000000004, as the sim's clock accumulates it
+    assert abs(image_stamp - 0.2) > 0.1
+    assert b.nearest(image_stamp, 0.1).stamp == 0.2
+    assert b.nearest(0.2 + 0.1 + 1e-3, 0.1) is None
+
+
 def test_reproject_pure_rotation_shifts_beams() -> None:
     """The robot turned +10° since the scan: a return that was at 0° is now at −10°."""
     ranges = np.full(360, np.inf)

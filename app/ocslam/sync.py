@@ -22,6 +22,10 @@ from app.ocslam.messages import LaserScan
 from app.ocslam.se2 import Pose2
 
 
+#: Slack added to stamp comparisons (sim stamps accumulate float rounding of their periods).
+STAMP_SLACK_S = 1e-6
+
+
 class PoseBuffer:
     """A bounded, time-ordered buffer of stamped poses with interpolation."""
 
@@ -74,11 +78,16 @@ class ScanBuffer:
         return self._scans[-1] if self._scans else None
 
     def nearest(self, stamp: float, tolerance_s: float) -> LaserScan | None:
-        """The scan whose stamp is nearest ``stamp``, if within ``tolerance_s``."""
+        """The scan whose stamp is nearest ``stamp``, if within ``tolerance_s``.
+
+        Stamps are sums of float periods (``0.1 + 0.2 != 0.3``), so a gap equal to the tolerance is
+        compared with a microsecond of slack: a camera half a LIDAR period off its scans must not lose
+        every other frame to rounding.
+        """
         if not self._scans:
             return None
         best = min(self._scans, key=lambda s: abs(s.stamp - stamp))
-        return best if abs(best.stamp - stamp) <= tolerance_s else None
+        return best if abs(best.stamp - stamp) <= tolerance_s + STAMP_SLACK_S else None
 
     def clear(self) -> None:
         self._scans.clear()

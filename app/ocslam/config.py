@@ -362,7 +362,7 @@ class ConsciousnessConfig:
         live=True,
     )
     presence_confidence: str = param(
-        "latest",
+        "best",
         choices=("latest", "mean", "best"),
         help="improved: Y_c of the soft decision: the new box's confidence (the paper), the mean or the best of the object's counted frames",
         live=True,

@@ -198,6 +198,7 @@ class Consciousness:
                     "detections": t.detections,
                     "misses": t.misses,
                     "complete_views": t.complete_views,
+                    "conf": [t.conf_sum, t.conf_n, t.conf_best],
                     "footprint": None
                     if t.footprint is None
                     else [float(t.footprint.center[0]), float(t.footprint.center[1]), float(t.footprint.yaw),
@@ -235,6 +236,9 @@ class Consciousness:
                     misses=int(td.get("misses", 0)),
                     complete_views=int(td.get("complete_views", 0)),
                 )
+                conf = td.get("conf")
+                if conf is not None and len(conf) == 3 and all(math.isfinite(float(v)) for v in conf):
+                    t.conf_sum, t.conf_n, t.conf_best = float(conf[0]), int(conf[1]), float(conf[2])
                 fp = td.get("footprint")
                 if fp is not None and len(fp) == 5 and all(math.isfinite(float(v)) for v in fp):
                     # as estimated live (with the occupancy grid then at hand)

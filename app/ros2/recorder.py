@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import os
 import queue
 import threading
 import time
@@ -65,19 +66,23 @@ class BagRecorder:
     """Writes one run to ``path`` (a new bag folder: ``metadata.yaml`` + ``<name>_0.mcap``)."""
 
     def __init__(self, path: str | Path, *, image_format: str = "jpeg", jpeg_quality: int = 95,
-                 map_hz: float = 1.0, cmd_vel_hz: float = 10.0) -> None:
+                 map_hz: float = 1.0, cmd_vel_hz: float = 10.0, process: bool = True) -> None:
         self.path = Path(path)
         if self.path.exists():
             raise RecordError(f"{self.path} exists already: a bag is never overwritten (choose another --record path)")
+        base = self.path.parent
+        while not base.exists() and base != base.parent:
+            base = base.parent
+        if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+            raise RecordError(f"cannot create bag {self.path}: {base} is not a writable directory")
         self.image_format = image_format
         self.jpeg_quality = int(jpeg_quality)
         self.map_period = 1.0 / map_hz
         self.cmd_period = 1.0 / cmd_vel_hz
-        self.store = ros2_typestore()
-        self.writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.process = process
         self.counts: dict[str, int] = {}
-        self.wall_s = 0.0  # time spent recording (for the RTF cost)
-        self._conns: dict[str, Any] = {}
+        self.wall_s = 0.0  # time spent recording on the loop's thread (for the RTF cost)
+        self.writer_cpu_s = 0.0  # CPU time of the writer process
         self._open = False
         self._last_odom = -1.0
         self._scans: int | None = None
@@ -85,68 +90,45 @@ class BagRecorder:
         self._snap: Any = None
         self._frames: deque | None = None  # (log time, frame, detections future) handed to the detector
         self._unhook: Any = None
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._batch: list = []
-        self._thread: threading.Thread | None = None
+        self._sink: Any = None
+        self._results: queue.SimpleQueue = queue.SimpleQueue()
         self.errors = 0  # messages that could not be written
         self._next_map = 0.0
         self._next_cmd = 0.0
 
     # -- writing -----------------------------------------------------------------------------------
-    def _write(self, topic: str, build: Any, t_log: float) -> None:
-        """Queue one message: ``build()`` makes it, on the writer thread (conversion, CDR and MCAP cost the
-        loop nothing but this call); everything ``build`` reads must not change afterwards."""
-        self._batch.append((topic, build, t_log))
+    def _write(self, topic: str, builder: str, args: tuple, t_log: float) -> None:
+        """Queue one message: ``BUILDERS[builder](*args)`` makes it in the writer process (conversion, CDR
+        and MCAP cost the loop only this call and the hand-over); ``args`` must not change afterwards."""
+        self._batch.append((topic, builder, args, t_log))
 
     def _flush(self) -> None:
-        if self._batch:
-            self._queue.put(self._batch)  # one hand-over per batch: fewer GIL switches for the loop
+        while True:  # results taken on the estimator thread
+            try:
+                self._batch.extend(self._results.get_nowait())
+            except queue.Empty:
+                break
+        if self._batch and self._sink is not None:
+            self._sink.send(self._batch)  # one hand-over per batch
             self._batch = []
-
-    def _writer_loop(self) -> None:
-        while True:
-            batch = self._queue.get()
-            if batch is None:
-                return
-            for item in batch:
-                self._write_now(*item)
-
-    def _write_now(self, topic: str, build: Any, t_log: float) -> None:
-        try:
-            msg = build()
-            conn = self._conns.get(topic)
-            if conn is None:
-                conn = self.writer.add_connection(topic, topics.RECORDED_TOPICS[topic], typestore=self.store,
-                                                  offered_qos_profiles=_qos(topic in topics.LATCHED_TOPICS))
-                self._conns[topic] = conn
-            self.writer.write(conn, convert.to_ns(t_log), self.store.serialize_cdr(msg, msg.__msgtype__))
-            self.counts[topic] = self.counts.get(topic, 0) + 1
-        except Exception:  # one bad message never stops the recording
-            log.exception("bag recorder: a %s message was not written", topic)
-            self.errors += 1
 
     # -- lifecycle ---------------------------------------------------------------------------------
     def start(self, pipe: "Pipeline") -> "BagRecorder":
         """Open the bag and write what is static: ``/tf_static`` and the ground truth."""
         t0 = time.perf_counter()
-        try:
-            self.writer.set_custom_data(WRITER_KEY, WRITER_VALUE)
-            dt = getattr(getattr(pipe, "sim", None), "dt", None)
-            if dt:
-                self.writer.set_custom_data(topics.STAMP_STEP_KEY, repr(float(dt)))
-            self.writer.open()
-        except (WriterError, OSError) as e:
-            raise RecordError(f"cannot create bag {self.path}: {e}") from None
+        custom = {WRITER_KEY: WRITER_VALUE}
+        dt = getattr(getattr(pipe, "sim", None), "dt", None)
+        if dt:
+            custom[topics.STAMP_STEP_KEY] = repr(float(dt))
+        self._sink = _ProcessSink(self.path, custom) if self.process else _ThreadSink(self.path, custom)
         self._open = True
         t = pipe.time
-        self._thread = threading.Thread(target=self._writer_loop, name="ocslam-bag-writer", daemon=True)
-        self._thread.start()
-        tfs = [convert.transform_stamped(t, p, c, T) for p, c, T in static_transforms(pipe.robot_model)]
-        self._write(topics.TF_STATIC, lambda: convert.tf_message(tfs), t)
+        self._write(topics.TF_STATIC, "tf_static", ([(t, p, c, T) for p, c, T in static_transforms(pipe.robot_model)],), t)
         try:
-            objs, obst = convert.ground_truth_to_ros(pipe.truth_objects_map(), pipe.truth_obstacles_map(), t)
-            self._write(topics.GT_OBJECTS, lambda: objs, t)
-            self._write(topics.GT_FOOTPRINTS, lambda: obst, t)
+            gt = (pipe.truth_objects_map(), pipe.truth_obstacles_map(), t)
+            self._write(topics.GT_OBJECTS, "gt_objects", gt, t)
+            self._write(topics.GT_FOOTPRINTS, "gt_footprints", gt, t)
         except Exception as e:  # a world without ground truth still records
             log.warning("ground truth not recorded: %s", e)
         self._next_map = t + self.map_period
@@ -168,27 +150,26 @@ class BagRecorder:
             stamp, T = latest
             self._last_odom = stamp
             v, w = pipe.odometry.linear_x, pipe.odometry.angular_z
-            self._write(topics.ODOM, lambda: convert.odom_to_ros(stamp, T, v, w), t)
-            self._write(topics.TF, lambda: convert.tf_message(
-                [convert.transform_stamped(stamp, "odom", "base_footprint", T)]), t)
+            self._write(topics.ODOM, "odom", (stamp, T, v, w), t)
+            self._write(topics.TF, "tf", (stamp, "odom", "base_footprint", T), t)
         if self._scans is None:
             self._scans = pipe.counters.scans  # scans before the recording started are not written
         if pipe.counters.scans != self._scans and pipe.last_scan is not None:
             self._scans = pipe.counters.scans
             scan = pipe.last_scan
-            self._write(topics.SCAN, lambda: convert.scan_to_ros(scan), t)
-            self._write(topics.EXACT_RANGES, lambda: convert.exact_ranges_to_ros(scan), t)
+            self._write(topics.SCAN, "scan", (scan,), t)
+            self._write(topics.EXACT_RANGES, "exact_ranges", (scan,), t)
             # map → odom as the loop publishes it now (a scan's own correction is published a period later)
             T_mo = pipe.T_map_odom
-            self._write(topics.TF, lambda: convert.tf_message([convert.transform_stamped(t, "map", "odom", T_mo)]), t)
+            self._write(topics.TF, "tf", (t, "map", "odom", T_mo), t)
             if pipe.truth_log and abs(pipe.truth_log[-1][0] - scan.stamp) < 1e-9:
                 T_true = pipe.truth_log[-1][1]
-                self._write(topics.GT_POSE, lambda: convert.pose_stamped(scan.stamp, "map", T_true), t)
+                self._write(topics.GT_POSE, "pose", (scan.stamp, "map", T_true), t)
         self._observe_camera(pipe, t)
         if t + 1e-9 >= self._next_cmd and pipe.drive_mode != "idle":
             self._next_cmd = t + self.cmd_period
             cmd = pipe.cmd
-            self._write(topics.CMD_VEL, lambda: convert.twist_to_ros(cmd), t)
+            self._write(topics.CMD_VEL, "twist", (cmd,), t)
         if t + 1e-9 >= self._next_map:
             self._next_map += self.map_period * max(1, int((t - self._next_map) / self.map_period) + 1)
             self._write_results(pipe, t)
@@ -237,10 +218,10 @@ class BagRecorder:
             if (info.width, info.height) != (img.width, img.height):
                 info = info.scaled(img.width, img.height)
             fmt, q = self.image_format, self.jpeg_quality
-            self._write(topics.IMAGE_COMPRESSED, lambda: convert.image_to_compressed(_stamped(img, dets.stamp), q, fmt), t_log)
-            self._write(topics.CAMERA_INFO, lambda: convert.camera_info_to_ros(info, dets.stamp), t_log)
-        self._write(topics.YOLO_BOXES, lambda: convert.yolo_boxes_to_ros(dets), t_log)
-        self._write(topics.EXACT_BOXES, lambda: convert.exact_boxes_to_ros(dets), t_log)
+            self._write(topics.IMAGE_COMPRESSED, "image", (_stamped(img, dets.stamp), q, fmt), t_log)
+            self._write(topics.CAMERA_INFO, "camera_info", (info, dets.stamp), t_log)
+        self._write(topics.YOLO_BOXES, "yolo_boxes", (dets,), t_log)
+        self._write(topics.EXACT_BOXES, "exact_boxes", (dets,), t_log)
 
     def _write_results(self, pipe: "Pipeline", t: float) -> None:
         """``/map``, ``/objects``, ``/objects/markers`` and ``/slam/pose_graph`` at ``t``: taken on the
@@ -258,18 +239,18 @@ class BagRecorder:
             slam = pipe.slam  # on the estimator thread: no wait
             grid = slam.occupancy_grid()
             if grid.width and grid.height:
-                out.append((topics.MAP, lambda: convert.grid_to_ros(grid, t), t))
+                out.append((topics.MAP, "map", (grid, t), t))
             graph = slam.pose_graph()
-            out.append((topics.POSE_GRAPH, lambda: convert.pose_graph_markers(graph, t), t))
+            out.append((topics.POSE_GRAPH, "pose_graph", (graph, t), t))
         if pipe.detector is not None:
             objs = [copy.copy(o) for o in pipe.objects_in_map()]
             thr = pipe.cfg.consciousness.presence_threshold
-            out.append((topics.OBJECTS, lambda: convert.objects_to_ros(objs, t), t))
-            out.append((topics.OBJECT_MARKERS, lambda: convert.object_markers([o for o in objs if o.presence >= thr], t), t))
+            out.append((topics.OBJECTS, "objects", (objs, t), t))
+            out.append((topics.OBJECT_MARKERS, "object_markers", ([o for o in objs if o.presence >= thr], t), t))
         if direct:
             self._batch.extend(out)
         else:
-            self._queue.put(out)
+            self._results.put(out)  # picked up by the loop thread's next flush
 
     def close(self, pipe: "Pipeline | None" = None) -> Path:
         """Write the final map, objects and graph (if ``pipe``) and finish the bag (``metadata.yaml``)."""
@@ -291,12 +272,141 @@ class BagRecorder:
                 self._unhook()
             self._open = False
             self._flush()
-            if self._thread is not None:
-                self._queue.put(None)
-                self._thread.join()
-            self.writer.close()
+            if self._sink is not None:
+                self.counts, self.errors = self._sink.close()
+                self.writer_cpu_s = getattr(self._sink, "child_cpu_s", 0.0)
             self.wall_s += time.perf_counter() - t0
         return self.path
+
+
+BUILDERS: dict[str, Any] = {
+    "tf_static": lambda items: convert.tf_message([convert.transform_stamped(t, p, c, T) for t, p, c, T in items]),
+    "gt_objects": lambda objs, obst, t: convert.ground_truth_to_ros(objs, obst, t)[0],
+    "gt_footprints": lambda objs, obst, t: convert.ground_truth_to_ros(objs, obst, t)[1],
+    "odom": convert.odom_to_ros,
+    "tf": lambda t, parent, child, T: convert.tf_message([convert.transform_stamped(t, parent, child, T)]),
+    "scan": convert.scan_to_ros,
+    "exact_ranges": convert.exact_ranges_to_ros,
+    "pose": convert.pose_stamped,
+    "twist": convert.twist_to_ros,
+    "image": convert.image_to_compressed,
+    "camera_info": convert.camera_info_to_ros,
+    "yolo_boxes": convert.yolo_boxes_to_ros,
+    "exact_boxes": convert.exact_boxes_to_ros,
+    "map": convert.grid_to_ros,
+    "pose_graph": convert.pose_graph_markers,
+    "objects": convert.objects_to_ros,
+    "object_markers": convert.object_markers,
+}
+
+
+class _BagFile:
+    """The MCAP bag itself: builds each message from its data and writes it (in the writer's process)."""
+
+    def __init__(self, path: Path, custom: dict[str, str]) -> None:
+        self.store = ros2_typestore()
+        self.writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        for k, v in custom.items():
+            self.writer.set_custom_data(k, v)
+        self.writer.open()
+        self.conns: dict[str, Any] = {}
+        self.counts: dict[str, int] = {}
+        self.errors = 0
+
+    def write(self, batch: list) -> None:
+        for topic, builder, args, t_log in batch:
+            try:
+                msg = BUILDERS[builder](*args)
+                conn = self.conns.get(topic)
+                if conn is None:
+                    conn = self.conns[topic] = self.writer.add_connection(
+                        topic, topics.RECORDED_TOPICS[topic], typestore=self.store,
+                        offered_qos_profiles=_qos(topic in topics.LATCHED_TOPICS))
+                self.writer.write(conn, convert.to_ns(t_log), self.store.serialize_cdr(msg, msg.__msgtype__))
+                self.counts[topic] = self.counts.get(topic, 0) + 1
+            except Exception:  # one bad message never stops the recording
+                log.exception("bag recorder: a %s message was not written", topic)
+                self.errors += 1
+
+    def close(self) -> tuple[dict[str, int], int]:
+        self.writer.close()
+        return self.counts, self.errors
+
+
+def _open_bag(path: Path, custom: dict[str, str]) -> _BagFile:
+    try:
+        return _BagFile(path, custom)
+    except (WriterError, OSError) as e:
+        raise RecordError(f"cannot create bag {path}: {e}") from None
+
+
+class _ThreadSink:
+    """Writes on a thread of this process (shares the GIL with the loop)."""
+
+    def __init__(self, path: Path, custom: dict[str, str]) -> None:
+        self.bag = _open_bag(path, custom)
+        self.q: queue.SimpleQueue = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._run, name="ocslam-bag-writer", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while (batch := self.q.get()) is not None:
+            self.bag.write(batch)
+
+    def send(self, batch: list) -> None:
+        self.q.put(batch)
+
+    def close(self) -> tuple[dict[str, int], int]:
+        self.q.put(None)
+        self.thread.join()
+        return self.bag.close()
+
+
+def _writer_process(conn: Any, q: Any, path: str, custom: dict[str, str]) -> None:
+    try:
+        bag = _open_bag(Path(path), custom)
+    except Exception as e:
+        conn.send(("error", str(e)))
+        return
+    conn.send(("ok", ""))
+    t_cpu = time.process_time()
+    while (batch := q.get()) is not None:
+        bag.write(batch)
+    counts, errors = bag.close()
+    conn.send((counts, errors, time.process_time() - t_cpu))
+
+
+class _ProcessSink:
+    """Writes in a child process (spawned: never fork a process holding pybullet): the loop only queues
+    the data (a feeder thread pickles it into the pipe), and the conversion, CDR and MCAP work runs in
+    the child, on the other core."""
+
+    def __init__(self, path: Path, custom: dict[str, str]) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self.conn, child = ctx.Pipe()
+        self.q = ctx.Queue()
+        self.proc = ctx.Process(target=_writer_process, args=(child, self.q, str(path), custom),
+                                name="ocslam-bag-writer", daemon=True)
+        self.proc.start()
+        child.close()
+        self.child_cpu_s = 0.0  # the child starts while the run goes on: its "ok" is read at close
+
+    def send(self, batch: list) -> None:
+        self.q.put(batch)
+
+    def close(self) -> tuple[dict[str, int], int]:
+        self.q.put(None)
+        status, msg = self.conn.recv() if self.proc.is_alive() or self.conn.poll() else ("error", "writer process died")
+        if status != "ok":
+            self.proc.join(timeout=5)
+            raise RecordError(msg)
+        counts, errors, self.child_cpu_s = self.conn.recv()
+        self.q.close()
+        self.q.join_thread()
+        self.proc.join(timeout=30)
+        return counts, errors
 
 
 def _stamped(img: Any, stamp: float) -> Any:

@@ -240,7 +240,11 @@ def build_camera_model(cfg: Config, robot_model: Any):
 class Pipeline:
     """Simulator + odometry + SLAM + detector + consciousness, advanced one physics step at a time."""
 
-    def __init__(self, cfg: Config, *, world: Any = None, detector: Any = "auto") -> None:
+    def __init__(self, cfg: Config, *, world: Any = None, detector: Any = "auto", same_thread: bool = True) -> None:
+        """``same_thread``: the loop will step (and render) on the thread that builds the pipeline, as in a
+        headless run. The server builds pipelines on one thread and steps them on its loop thread: it
+        passes ``False``, and the loop's own simulator then renders with TinyRenderer (an EGL context
+        belongs to the thread that made it; the camera's render process keeps EGL)."""
         from app.ocslam.consciousness import Consciousness
         from app.ocslam.slam import Slam
         from app.robot_model import RobotModel
@@ -264,7 +268,10 @@ class Pipeline:
         self.detector = detector
         # the loop's own client renders only without a render process: it skips the EGL context then
         render_process = self.detector is not None and cfg.camera.async_render
-        self.sim = SimWorld(self.world, cfg, seed=cfg.sim.seed, renderer="tiny" if render_process else None)
+        # only the primary camera rendered in the loop, on the thread that built it, uses EGL; previews
+        # (no detector) are small TinyRenderer frames
+        loop_renderer = None if (same_thread and self.detector is not None and not render_process) else "tiny"
+        self.sim = SimWorld(self.world, cfg, seed=cfg.sim.seed, renderer=loop_renderer)
         self.T_world_start: Pose2 = self.sim.true_pose()
         self.T_map_world: Pose2 = self.T_world_start.inverse()
         self.T_base_scan: Pose2 = self.robot_model.T_base_scan_2d()

@@ -55,7 +55,7 @@ class OcslamApp:
             token=self.token,
         )
         try:
-            self.pipeline = pipeline if pipeline is not None else Pipeline(cfg)
+            self.pipeline = pipeline if pipeline is not None else Pipeline(cfg, same_thread=False)
         except BaseException:
             self.server.stop()
             raise
@@ -292,7 +292,7 @@ class OcslamApp:
         try:
             try:
                 world = load_world(path)
-                new = Pipeline(self.cfg, world=world)
+                new = Pipeline(self.cfg, world=world, same_thread=False)
             except Exception as e:
                 log.warning("world %s not loaded: %s", path, e)
                 self.notify(client, "World not loaded", f"{self._shown(path)}: {safe_message(e, files=(path,))}",

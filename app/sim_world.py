@@ -467,6 +467,9 @@ class SimWorld:
                 log.warning("EGL plugin did not load; using TinyRenderer")
                 self.renderer, self.renderer_note = "tiny", "TinyRenderer (fallback: the EGL plugin did not load)"
         self._renderer_flag = p.ER_BULLET_HARDWARE_OPENGL if self.renderer == "egl" else p.ER_TINY_RENDERER
+        #: the EGL plugin's OpenGL context is current on the thread that loaded it only: a render from any
+        #: other thread crashes the process (even with ER_TINY_RENDERER), so it is refused instead
+        self._gl_thread: int | None = threading.get_ident() if self.renderer == "egl" else None
         self.object_body_ids: dict[int, list[int]] = {}
         #: body id → (kind, index, role): kind "object" | "obstacle" | "wall" | "floor" | "glass"
         self.body_info: dict[int, tuple[str, int, str]] = {}
@@ -858,6 +861,11 @@ class SimWorld:
         light: dict | None = None,
     ) -> CameraFrame:
         p, cid = self._p, self.client
+        if self._gl_thread is not None and threading.get_ident() != self._gl_thread:
+            raise RendererError(
+                "the EGL renderer draws only on the thread that built this world; "
+                "build it on the rendering thread or use sim.renderer=tiny"
+            )
         cc = self.config.camera
         info = CameraInfo.from_fov(width, height, cc.hfov_rad)
         eye = T_world_cam[:3, 3]

@@ -11,10 +11,9 @@ from app.bench.wsclient import FakeViserClient
 from app.config import Config
 from app.server import OcslamApp
 
-#: TinyRenderer in these server tests: on 2026-12-01 a SimWorld on pybullet's EGL renderer segfaults when
-#: it renders from a thread other than the one that created it (the loop thread's camera preview), see
-#: SEC's report; the renderer has its own tests (tests/test_sim_world.py, tests/test_render_worker.py)
-BASE = ["detector.kind=none", "server.port=0", "sim.renderer=tiny"]
+#: the default renderer (auto): the server's loop thread renders the camera preview itself with TinyRenderer
+#: (an EGL context belongs to the thread that made it; a render from another thread used to kill the process)
+BASE = ["detector.kind=none", "server.port=0"]
 
 
 def wait_for(cond, timeout=20.0, what="condition"):
@@ -103,3 +102,12 @@ def test_deadman_expires() -> None:
     assert t.command().linear_x == 0.0
     t.press("w")  # not a teleop key (viser's camera owns WASD)
     assert t.command().linear_x == 0.0
+
+
+def test_metrics_panel_names_the_renderer_and_the_loop_closures(app) -> None:
+    wait_for(lambda: app.pipeline.time > 1.5, what="the sim to advance")
+    wait_for(lambda: "loop closures:" in app.panels.metrics_md.content, what="the metrics panel")
+    text = app.panels.metrics_md.content
+    assert "TinyRenderer" in text and "camera " in text
+    assert "accepted" in text and "rejected" in text
+    assert app.pipeline.sim.renderer == "tiny" and app.loop_error is None

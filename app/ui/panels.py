@@ -380,6 +380,12 @@ class Panels:
         c = p.counters
         lines += ["", f"scans {c.scans} · images {c.images} · detections {c.detections} · skipped {sum(c.skipped_frames.values())}"
                   f" · errors {sum(c.errors.values())}"]
+        m = p.metrics()
+        w, h = m["camera_size"]
+        lines += [f"camera {w}×{h} · {m['renderer_note']}"]
+        sm = p.slam.metrics()
+        lines += [f"loop closures: {sm['slam_loops_accepted']} accepted · {sm['slam_loops_rejected']} rejected"
+                  f" · {sm['slam_loops_pending']} pending"]
         self.metrics_md.content = "\n".join(lines)
         now = p.time
         if now - self._last_hist < 1.0:

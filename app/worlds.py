@@ -75,8 +75,10 @@ MAX_WAYPOINTS = 2000
 MAX_COORD_M = 500.0
 #: every size (wall thickness/height, box sides, cylinder diameter/height, scaled models, lifts)
 MAX_SIZE_M = 50.0
-#: world files larger than this are refused before they are parsed
-MAX_FILE_BYTES = 8 * 2**20
+#: world files larger than this are refused before they are parsed (a world at every limit is ~0.1 MiB)
+MAX_FILE_BYTES = 2 * 2**20
+#: libyaml's safe loader where PyYAML has it (several times faster), else the pure-Python one
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 class WorldError(ValueError):
@@ -559,7 +561,7 @@ def load_world(path: str | Path, *, validate: bool = True) -> World:
     except UnicodeDecodeError:
         raise WorldError(f"{p}: not a world file (binary data, not UTF-8 YAML text)") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_YAML_LOADER)
     except yaml.YAMLError as e:
         raise WorldError(f"{p}: malformed YAML: {yaml_error_line(e)}") from None
     try:
@@ -712,8 +714,10 @@ def _first_overlaps(geoms: list[Any], others: list[Any] | None = None, tol: floa
 
 def world_region(world: World) -> Any:
     """The area inside the walls: every area the walls enclose (doors, windows and passages closed; gaps
-    up to 5 cm at corners closed), with the walls themselves. Empty if the walls enclose nothing."""
-    walls = unary_union([w.polygon() for w in world.walls]).buffer(0.025, join_style="mitre").buffer(-0.025, join_style="mitre")
+    up to 5 cm at corners closed), with the walls themselves (2.5 cm thicker). Empty if the walls enclose
+    nothing."""
+    grown = shapely.buffer(np.array([w.polygon() for w in world.walls], dtype=object), 0.025, join_style="mitre")
+    walls = shapely.union_all(grown)  # each wall 2.5 cm thicker: corner gaps up to 5 cm close
     parts = list(getattr(walls, "geoms", [walls]))
     filled = [Polygon(g.exterior) for g in parts if isinstance(g, Polygon) and not g.is_empty and len(g.interiors)]
     if not filled:
@@ -787,9 +791,12 @@ def validate_world(world: World, *, robot_radius: float = ROBOT_RADIUS_M, route_
     if not region.covers(Point(world.start.x, world.start.y)):
         why = "the walls enclose no area" if region.is_empty else "not in any area the walls enclose"
         raise WorldError(f"start: the robot at ({world.start.x:.3f}, {world.start.y:.3f}) is outside the walls ({why})")
-    blocking = world.blocking_geometry()
-    b_names = [bn for bn, _ in blocking]
-    b_geoms = [bg for _, bg in blocking]
+    # = world.blocking_geometry(), from the polygons built above
+    n_obs = len(world.obstacles)
+    b_names = [wall_names[k] for k in wall_idx] + [names[i] for i, o in enumerate(world.obstacles) if o.z_range()[0] < ROBOT_HEIGHT_M]
+    b_geoms = [wall_geoms[k] for k in wall_idx] + [geoms[i] for i, o in enumerate(world.obstacles) if o.z_range()[0] < ROBOT_HEIGHT_M]
+    b_names += names[n_obs:]
+    b_geoms += geoms[n_obs:]
     tree = shapely.STRtree(b_geoms) if b_geoms else None
     disc = Point(world.start.x, world.start.y).buffer(robot_radius, 32)
     if tree is not None:

@@ -444,3 +444,13 @@ def test_world_random_out_that_is_a_folder(tmp_path, capsys):
 def test_soak_arguments(argv, message, capsys):
     rc, _, err = run_cli(argv, capsys)
     assert_clear_error(rc, err, message)
+
+
+def test_exports_of_a_good_session_write_strict_json_with_the_usual_mode(scratch, capsys):
+    """Item 10: the exported files get the same mode as every other file (map.yaml/map.pgm were 0600)."""
+    for what, name in (("map", "m.yaml"), ("objects", "o.json"), ("trajectory", "t.tum")):
+        rc, _, err = run_cli(["export", what, "runs/old", "--out", name], capsys)
+        assert rc == 0, err
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in scratch.iterdir() if p.is_file()}
+    assert {"m.yaml", "m.pgm", "o.json", "t.tum", "note.txt"} <= set(modes) and len(set(modes.values())) == 1, modes
+    json.loads((scratch / "o.json").read_text(), parse_constant=lambda c: pytest.fail(f"bare {c}"))

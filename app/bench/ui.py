@@ -15,6 +15,8 @@ count at the end (goal: the loop's real-time factor and memory unchanged, no cli
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import time
 
@@ -38,7 +40,8 @@ def measure(cfg, n_clients: int, seconds: float) -> dict:
 
     cfg = cfg.copy()
     cfg.set("server.port", 0)
-    app = OcslamApp(cfg).start()
+    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner would break --json
+        app = OcslamApp(cfg).start()
     try:
         app.submit(lambda p: p.follow_route(cfg.sim.route))
         clients = [FakeViserClient(app.port).connect() for _ in range(n_clients)]
@@ -71,7 +74,8 @@ def measure(cfg, n_clients: int, seconds: float) -> dict:
             "cores": os.cpu_count(),
         }
     finally:
-        app.stop()
+        with contextlib.redirect_stdout(io.StringIO()):
+            app.stop()
 
 
 def _rss_mib() -> float:
@@ -89,7 +93,8 @@ def measure_churn(cfg, n_clients: int, seconds: float, every: float) -> dict:
 
     cfg = cfg.copy()
     cfg.set("server.port", 0)
-    app = OcslamApp(cfg).start()
+    with contextlib.redirect_stdout(io.StringIO()):  # viser's banner would break --json
+        app = OcslamApp(cfg).start()
     rng = random.Random(0)
     window = seconds / 3.0
     clients: list = []
@@ -145,7 +150,8 @@ def measure_churn(cfg, n_clients: int, seconds: float, every: float) -> dict:
     finally:
         for c in clients:
             c.close()
-        app.stop()
+        with contextlib.redirect_stdout(io.StringIO()):
+            app.stop()
 
 
 def run(args: argparse.Namespace) -> int:

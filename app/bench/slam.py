@@ -254,7 +254,7 @@ def run(args: argparse.Namespace) -> int:
     if args.suite == "bag":
         return _run_bag(args, cfg)
     if args.dir is None:
-        print("ocslam bench slam: give a log directory or --suite synthetic|perturbed", file=sys.stderr)
+        print("ocslam bench slam: give a log directory or --suite synthetic|perturbed|bag", file=sys.stderr)
         return 2
     from app.ocslam.mapio import save_map
 

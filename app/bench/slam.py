@@ -345,7 +345,8 @@ def _run_synthetic(args: argparse.Namespace, cfg: SlamConfig) -> int:
         r["meets_targets"] = bool(
             r["heading_err_max_deg"] <= SYNTH_TARGETS["heading_err_max_deg"]
             and r["trans_mean_m"] <= SYNTH_TARGETS["trans_mean_m"]
-            and r["false_loops_accepted"] <= SYNTH_TARGETS["false_loops_accepted"]
+            # the false-closure target is the symmetric floor's (issue 11); the others report theirs
+            and (nm != "symmetric" or r["false_loops_accepted"] <= SYNTH_TARGETS["false_loops_accepted"])
         )
         results.append(r)
     report = {

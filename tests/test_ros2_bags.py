@@ -247,3 +247,28 @@ def test_cli_errors_are_one_line(tmp_path):
     r = subprocess.run([sys.executable, "-m", "app", "replay", str(tmp_path / "missing"), "--headless"],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "bag not found" in r.stderr
+
+
+def test_topics_filter_and_start(tmp_path):
+    p = write_bag(tmp_path / "room", "mcap")
+    with pytest.raises(BagError, match="no odometry"):
+        read_bag(p, only={"/scan"})  # --topics /scan: the odometry is left out
+    assert read_bag(p, only={"/scan", "/odom"}).topic_counts["/scan"] == 60
+
+
+def test_headless_replay_writes_a_run_directory(tmp_path):
+    import json
+
+    from app.cli import main
+
+    p = write_bag(tmp_path / "room", "sqlite3")
+    out = tmp_path / "run"
+    assert main(["replay", str(p), "--headless", "--quiet", "--start", "4", "--out", str(out)]) == 0
+    for f in ("config.yaml", "summary.json", "map.yaml", "map.pgm", "objects.json", "trajectory_slam.tum",
+              "trajectory_odom.tum"):
+        assert (out / f).is_file(), f
+    s = json.loads((out / "summary.json").read_text())
+    assert s["end_reason"] == "end of bag" and s["counters"]["scans"] == 40  # --start 4: the last 8 s
+    assert s["lidar_extrinsic"] == "/tf_static" and s["bag_time_s"] == pytest.approx(8.0, abs=0.1)
+    lines = (out / "trajectory_slam.tum").read_text().splitlines()
+    assert len(lines) == 41 and float(lines[1].split()[0]) == pytest.approx(4.1, abs=1e-6)

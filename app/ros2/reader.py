@@ -207,25 +207,26 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
         kinds[topics.MAP] = "map"
         kinds[topics.EXACT_RANGES] = "scan_exact"
         kinds[topics.EXACT_BOXES] = "boxes_exact"
+    avail = {t: n for t, n in counts.items() if want(t)}  # what --topics lets through
     # what must be there
     for topic, what in ((names.scan, "scan"),):
-        if counts.get(topic, 0) == 0:
+        if avail.get(topic, 0) == 0:
             raise BagError(f"{path}: no {what} messages on {topic} "
-                           f"({'topic missing' if topic not in counts else 'topic empty'}; topics: {', '.join(sorted(counts)) or 'none'}); "
+                           f"({'topic missing' if topic not in avail else 'topic empty'}; topics: {', '.join(sorted(avail)) or 'none'}); "
                            f"set replay.scan_topic")
-    for topic in (names.odom, names.camera_info, names.image if names.image in counts else names.image_raw):
-        if topic in counts and counts[topic] == 0:
+    for topic in (names.odom, names.camera_info, names.image if names.image in avail else names.image_raw):
+        if topic in avail and avail[topic] == 0:
             warnings.append(f"topic {topic} is in the bag but empty")
     odom_source = "odom"
-    if counts.get(names.odom, 0) == 0:
-        if counts.get(topics.TF, 0) == 0:
-            raise BagError(f"{path}: no odometry: {names.odom} is {'empty' if names.odom in counts else 'missing'} "
+    if avail.get(names.odom, 0) == 0:
+        if avail.get(topics.TF, 0) == 0:
+            raise BagError(f"{path}: no odometry: {names.odom} is {'empty' if names.odom in avail else 'missing'} "
                            f"and there is no /tf (odom → base); set replay.odom_topic")
         odom_source = "tf"
-        warnings.append(f"topic {names.odom} is {'empty' if names.odom in counts else 'missing'}: odometry from /tf odom → base")
-    if names.image not in counts and names.image_raw not in counts:
+        warnings.append(f"topic {names.odom} is {'empty' if names.odom in avail else 'missing'}: odometry from /tf odom → base")
+    if names.image not in avail and names.image_raw not in avail:
         warnings.append(f"no camera topic ({names.image} or {names.image_raw}): mapping only")
-    elif names.camera_info not in counts or counts[names.camera_info] == 0:
+    elif names.camera_info not in avail or avail[names.camera_info] == 0:
         warnings.append(f"topic {names.camera_info} is missing or empty: the camera is not used (mapping only)")
 
     start_ns = int(reader.start_time) if reader.message_count else 0

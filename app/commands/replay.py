@@ -119,9 +119,9 @@ def run_headless(core, *, out: Path | None = None, rate: float | None = None, qu
                 print(f"{k:>28}: {summary[k]}")
         rep = core.object_report() if core.fusing else None
         if rep is not None:
-            from app.ocslam.evaluation import format_table
+            from app.ocslam.evaluation import PAPER_ROW, format_table
 
             print()
-            print(format_table({"replay": rep}))
+            print(format_table({"paper (seed, real robot)": PAPER_ROW, "replay": rep}))
         print(f"{'run directory':>28}: {out}")
     return 130 if interrupted["flag"] else 0

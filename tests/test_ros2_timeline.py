@@ -16,8 +16,6 @@ from app.ros2.reader import read_bag  # noqa: E402
 from app.ros2.replay import ReplayCore  # noqa: E402
 from app.ui.replay import ReplayApp, ReplayPlayer  # noqa: E402
 
-pytestmark = pytest.mark.slow  # several replays of the 12 s room bag (≈ 30 s on a quiet machine)
-
 
 @pytest.fixture(scope="module")
 def bag_path(tmp_path_factory) -> Path:

@@ -254,3 +254,19 @@ def test_short_headless_run_on_a_zoo_world_explains_its_misses():
     assert rep["tp"] >= 1
     door = next(r for r in rep["rows"] if r["kind"] == "truth" and r["class"] == "door")
     assert door["matched"] or door["cause"] == "never_in_view"
+
+
+def test_run_jobs_writes_each_world_as_it_is_done(tmp_path: Path, monkeypatch):
+    """The suite runner keeps the jobs' order and appends every finished world to the JSONL file
+    (here with a world loader that fails, so no simulator is started)."""
+    import json
+
+    from app.bench import objects as bench
+    from app.config import Config
+
+    jobs = [{"name": "a", "file": str(tmp_path / "missing_a.yaml")}, {"name": "b", "file": str(tmp_path / "missing_b.yaml")}]
+    out = bench.run_jobs(Config(), jobs, 1.0, workers=1, quiet=True, jsonl=tmp_path / "w.jsonl")
+    assert [r["job"]["name"] for r in out] == ["a", "b"] and all("cannot read world file" in r["error"] for r in out)
+    lines = [json.loads(line) for line in (tmp_path / "w.jsonl").read_text().splitlines()]
+    assert [r["job"]["name"] for r in lines] == ["a", "b"]
+    assert bench.summarize(out)["worlds_failed"] == 2

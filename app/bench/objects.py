@@ -56,6 +56,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", action="append", default=[], metavar="NAME",
                    help="with --suite: run only these worlds (by name; repeatable)")
     p.add_argument("--workers", type=int, default=2, help="worker processes for --suite and --worlds (1: in this process)")
+    p.add_argument("--jsonl", type=Path, default=None,
+                   help="with --suite/--worlds: append each world's report to this file as soon as it is done "
+                        "(a long suite that is stopped keeps the worlds it finished)")
     p.add_argument("--duration", type=float, default=1500.0, help="max sim seconds per world")
     p.add_argument("--json", action="store_true")
 
@@ -199,9 +202,9 @@ def _run_job(cfg_dict: dict, job: dict[str, Any], duration: float) -> dict:
     from app.config import Config
 
     cfg = Config.from_dict(cfg_dict)
-    world = _job_world(job)
-    route = "tour" if "tour" in world.routes else next(iter(world.routes))
     try:
+        world = _job_world(job)
+        route = "tour" if "tour" in world.routes else next(iter(world.routes))
         rep = run_world(cfg, route, duration, world)
     except Exception as e:  # one broken world must not lose the others' figures
         return {"job": job, "error": f"{type(e).__name__}: {e}"}
@@ -209,29 +212,40 @@ def _run_job(cfg_dict: dict, job: dict[str, Any], duration: float) -> dict:
     return rep
 
 
-def run_jobs(cfg, jobs: list[dict[str, Any]], duration: float, workers: int = 2, quiet: bool = False) -> list[dict]:
-    """Run every job (in ``workers`` processes; 1: here), results in the jobs' order."""
+def run_jobs(cfg, jobs: list[dict[str, Any]], duration: float, workers: int = 2, quiet: bool = False,
+             jsonl: Path | None = None) -> list[dict]:
+    """Run every job (in ``workers`` processes; 1: here), results in the jobs' order; each result is
+    also appended to ``jsonl`` (one JSON object a line) as soon as its world is done."""
+    import json
+
     cfg_dict = cfg.to_dict()
+
+    def done(k: int, r: dict) -> None:
+        if jsonl is not None:
+            with open(jsonl, "a", encoding="utf-8") as f:
+                f.write(json.dumps(r, default=float) + "\n")
+        if not quiet:
+            msg = r.get("error") or f"F1 {r.get('f1', 0):.3f}, {r.get('wall_s')} s"
+            print(f"world {k + 1}/{len(jobs)} ({jobs[k]['name']}): {msg}", file=sys.stderr, flush=True)
+
     if workers <= 1 or len(jobs) <= 1:
         out = []
         for k, job in enumerate(jobs):
-            if not quiet:
-                print(f"world {k + 1}/{len(jobs)} ({job['name']})…", file=sys.stderr, flush=True)
             out.append(_run_job(cfg_dict, job, duration))
+            done(k, out[-1])
         return out
     import multiprocessing as mp
+    from concurrent.futures import as_completed
 
     ctx = mp.get_context("spawn")  # pybullet and onnxruntime do not survive a fork
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-        futs = [ex.submit(_run_job, cfg_dict, job, duration) for job in jobs]
-        out = []
-        for k, f in enumerate(futs):
-            out.append(f.result())
-            if not quiet:
-                r = out[-1]
-                msg = r.get("error") or f"F1 {r.get('f1', 0):.3f}, {r.get('wall_s')} s"
-                print(f"world {k + 1}/{len(jobs)} ({jobs[k]['name']}): {msg}", file=sys.stderr, flush=True)
-        return out
+        futs = {ex.submit(_run_job, cfg_dict, job, duration): k for k, job in enumerate(jobs)}
+        results: dict[int, dict] = {}
+        for f in as_completed(futs):
+            k = futs[f]
+            results[k] = f.result()
+            done(k, results[k])
+        return [results[k] for k in range(len(jobs))]
 
 
 def summarize(per_world: list[dict]) -> dict[str, Any]:
@@ -301,7 +315,7 @@ def run(args: argparse.Namespace) -> int:
                     for i in range(args.worlds)]
             label = f"{args.worlds} random worlds (rooms)"
         t0 = time.perf_counter()
-        per_world = run_jobs(cfg, jobs, args.duration, workers=max(1, int(args.workers)))  # progress on stderr
+        per_world = run_jobs(cfg, jobs, args.duration, workers=max(1, int(args.workers)), jsonl=args.jsonl)  # progress: stderr
         summary = summarize(per_world)
         out = {"suite": label, "mode": cfg.consciousness.mode, "detector": cfg.detector.kind, "sim_seed": cfg.sim.seed,
                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "command": command,

@@ -372,14 +372,3 @@ class ConsciousnessConfig:
         help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",
         live=True,
     )
-    point_ownership: bool = param(
-        True,
-        help="improved: each LIDAR island belongs to one box's object per frame (the narrowest boxes choose first, then "
-        "the nearest); objects of different classes collide only over the points they share",
-        live=True,
-    )
-    shared_evidence_fraction: float = param(
-        0.5, min=0.0, max=1.0, step=0.05,
-        help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",
-        live=True,
-    )

@@ -11,6 +11,9 @@ Pure Python on top of the ``rosbags`` package (no ROS installation needed). One 
 - :mod:`app.ros2.reader`: :func:`read_bag` opens ROS 1 ``.bag``, rosbag2 sqlite3 and MCAP bags.
 - :mod:`app.ros2.replay`: :class:`ReplayCore` feeds the core from a bag (scan, odometry, camera or the
   recorded ``/yolo_boxes``), with snapshots to seek.
+- :mod:`app.ros2.rundir`: a replay's run directory (the files of a headless run).
+- :mod:`app.ros2.compare`: trajectory and object-map differences between a replay and the live run.
+- :mod:`app.ros2.errors`: :class:`BagError`, :class:`RecordError` (one clear line each).
 
 Frames follow REP-105: ``map → odom → base_footprint → base_link → {base_scan, camera_link →
 camera_optical_frame}``. Stamps are sim time (a run starts at t = 0).

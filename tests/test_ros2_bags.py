@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer as Writer1
-from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
 
 from app.config import Config
 from app.ros2.errors import BagError

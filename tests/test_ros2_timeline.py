@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_ros2_bags import write_bag  # noqa: E402  (the synthetic room bag)
+from test_ros2_bags import write_bag
 
-from app.config import Config  # noqa: E402
-from app.ros2.reader import read_bag  # noqa: E402
-from app.ros2.replay import ReplayCore  # noqa: E402
-from app.ui.replay import ReplayApp, ReplayPlayer  # noqa: E402
+from app.config import Config
+from app.ros2.reader import read_bag
+from app.ros2.replay import ReplayCore
+from app.ui.replay import ReplayApp, ReplayPlayer
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,7 @@ def trajectory_difference(stamps_a: np.ndarray, poses_a: np.ndarray, stamps_b: n
     a, b = np.asarray(poses_a)[ok], np.asarray(poses_b)[j[ok]]
     d = np.hypot(*(a[:, :2] - b[:, :2]).T)
     dyaw = np.abs(np.remainder(a[:, 2] - b[:, 2] + np.pi, 2 * np.pi) - np.pi)
-    return {"matched": int(ok.sum()), "of": int(len(sa)), "max_m": float(d.max()) if len(d) else float("nan"),
+    return {"matched": int(ok.sum()), "of": len(sa), "max_m": float(d.max()) if len(d) else float("nan"),
             "rms_m": float(np.sqrt(np.mean(d**2))) if len(d) else float("nan"),
             "max_yaw_rad": float(dyaw.max()) if len(dyaw) else float("nan")}
 

@@ -10,8 +10,8 @@ LIDAR (a 180° roll or pitch) thereby has its scan mirrored in the plane, exactl
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray

@@ -13,9 +13,10 @@ from wall-clock bags; 0 for OCSLAM's sim-time bags), so the core sees small, exa
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -134,7 +135,7 @@ def read_bag(path: str | Path, names: BagTopics | None = None, *, with_images: b
     ``only``: topic names to read (``--topics``); the rest is skipped. ``with_images=False`` leaves the
     camera images out (``--reuse-detections``). Raises :class:`BagError` with one clear line when the
     bag is missing, unreadable, or lacks a scan or odometry."""
-    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.highlevel import AnyReader
 
     names = names or BagTopics()
     path = Path(path)
@@ -183,9 +184,9 @@ def _index(reader: Any, path: Path, names: BagTopics, with_images: bool, only: s
     warnings: list[str] = []
     ocslam = False
     try:
-        from app.ros2.recorder import WRITER_KEY, WRITER_VALUE
-
         import yaml
+
+        from app.ros2.recorder import WRITER_KEY, WRITER_VALUE
 
         meta = path if path.is_dir() else path.parent
         info = yaml.safe_load((meta / "metadata.yaml").read_text(encoding="utf-8")) if (meta / "metadata.yaml").is_file() else {}

@@ -114,7 +114,7 @@ class BagRecorder:
             self._batch = []
 
     # -- lifecycle ---------------------------------------------------------------------------------
-    def start(self, pipe: "Pipeline") -> "BagRecorder":
+    def start(self, pipe: Pipeline) -> BagRecorder:
         """Open the bag and write what is static: ``/tf_static`` and the ground truth."""
         t0 = time.perf_counter()
         custom = {WRITER_KEY: WRITER_VALUE}
@@ -139,7 +139,7 @@ class BagRecorder:
         self.wall_s += time.perf_counter() - t0
         return self
 
-    def observe(self, pipe: "Pipeline") -> None:
+    def observe(self, pipe: Pipeline) -> None:
         """Write whatever the last step produced (call after each ``pipe.step()``)."""
         if not self._open:
             return
@@ -177,7 +177,7 @@ class BagRecorder:
             self._flush()
         self.wall_s += time.perf_counter() - t0
 
-    def _hook_detector(self, pipe: "Pipeline") -> bool:
+    def _hook_detector(self, pipe: Pipeline) -> bool:
         """See each camera frame when the loop hands it to the detector (``pipe.jobs.detect``): the frame
         and its detections' future, logged at that instant, the one the fusion's inputs are taken at."""
         jobs = getattr(pipe, "jobs", None)
@@ -195,7 +195,7 @@ class BagRecorder:
         self._unhook = lambda: setattr(jobs, "detect", detect)
         return True
 
-    def _observe_camera(self, pipe: "Pipeline", t: float) -> None:
+    def _observe_camera(self, pipe: Pipeline, t: float) -> None:
         """Write the frames whose detections are ready, in the order they were taken."""
         if self._frames is None:  # no detector hook: the last fusion's frame, logged when seen
             snap = pipe.fusion
@@ -212,7 +212,7 @@ class BagRecorder:
             if dets is not None:  # None: the detector failed on it (the loop counted it)
                 self._write_frame(pipe, t_log, getattr(frame, "image", None), dets)
 
-    def _write_frame(self, pipe: "Pipeline", t_log: float, img: Any, dets: Any) -> None:
+    def _write_frame(self, pipe: Pipeline, t_log: float, img: Any, dets: Any) -> None:
         if img is not None:
             info = pipe.camera_model.info
             if (info.width, info.height) != (img.width, img.height):
@@ -223,7 +223,7 @@ class BagRecorder:
         self._write(topics.YOLO_BOXES, "yolo_boxes", (dets,), t_log)
         self._write(topics.EXACT_BOXES, "exact_boxes", (dets,), t_log)
 
-    def _write_results(self, pipe: "Pipeline", t: float) -> None:
+    def _write_results(self, pipe: Pipeline, t: float) -> None:
         """``/map``, ``/objects``, ``/objects/markers`` and ``/slam/pose_graph`` at ``t``: taken on the
         estimator thread after the jobs already queued (``pipe.jobs.estimate``), so the loop never waits
         and the state is the one a sequential run has at ``t``."""
@@ -233,7 +233,7 @@ class BagRecorder:
         else:
             estimate(self._results_job, pipe, t)
 
-    def _results_job(self, pipe: "Pipeline", t: float, direct: bool = False) -> None:
+    def _results_job(self, pipe: Pipeline, t: float, direct: bool = False) -> None:
         out: list = []
         if pipe.cfg.slam.enabled:
             slam = pipe.slam  # on the estimator thread: no wait
@@ -252,7 +252,7 @@ class BagRecorder:
         else:
             self._results.put(out)  # picked up by the loop thread's next flush
 
-    def close(self, pipe: "Pipeline | None" = None) -> Path:
+    def close(self, pipe: Pipeline | None = None) -> Path:
         """Write the final map, objects and graph (if ``pipe``) and finish the bag (``metadata.yaml``)."""
         if not self._open:
             return self.path
@@ -415,7 +415,7 @@ def _stamped(img: Any, stamp: float) -> Any:
     return img if img.stamp == stamp else replace(img, stamp=stamp)
 
 
-def attach(pipe: "Pipeline", path: str | Path, **kwargs: Any) -> BagRecorder:
+def attach(pipe: Pipeline, path: str | Path, **kwargs: Any) -> BagRecorder:
     """Start a recorder on ``pipe`` and make every ``pipe.step()`` feed it (the live web app's hook).
 
     The instance's ``step`` is wrapped; :func:`detach` (or ``pipe.close``) restores it."""
@@ -439,7 +439,7 @@ def attach(pipe: "Pipeline", path: str | Path, **kwargs: Any) -> BagRecorder:
     return rec
 
 
-def detach(pipe: "Pipeline", rec: BagRecorder) -> Path:
+def detach(pipe: Pipeline, rec: BagRecorder) -> Path:
     """Stop recording: restore ``pipe.step`` and finish the bag."""
     restore = getattr(rec, "_restore", None)
     if restore is not None:

@@ -27,7 +27,14 @@ from typing import Any
 import numpy as np
 
 from app.config import Config
-from app.ocslam.messages import Detections, GroundTruthObject, GroundTruthObstacle, Image, LaserScan, TrackedObject
+from app.ocslam.messages import (
+    Detections,
+    GroundTruthObject,
+    GroundTruthObstacle,
+    Image,
+    LaserScan,
+    TrackedObject,
+)
 from app.ocslam.se2 import Pose2
 from app.ocslam.sync import PoseBuffer, ScanBuffer, reproject_scan
 from app.ros2.errors import BagError

@@ -25,7 +25,7 @@ def _json_default(o: Any) -> Any:
     return str(o)
 
 
-def write_files(core: "ReplayCore", d: Path, summary: dict[str, Any]) -> None:
+def write_files(core: ReplayCore, d: Path, summary: dict[str, Any]) -> None:
     """Fill directory ``d`` with the replay's results."""
     from app.config import atomic_write_text
     from app.ocslam.mapio import save_map
@@ -52,7 +52,7 @@ def write_files(core: "ReplayCore", d: Path, summary: dict[str, Any]) -> None:
         atomic_write_text(d / "trajectory_odom.tum", tum_lines(s, o))
 
 
-def write_run_dir(core: "ReplayCore", out: str | Path, summary: dict[str, Any]) -> Path:
+def write_run_dir(core: ReplayCore, out: str | Path, summary: dict[str, Any]) -> Path:
     """Write ``out`` as a unit (:func:`app.session.write_run_dir` where available)."""
     try:
         from app.session import write_run_dir as write_unit

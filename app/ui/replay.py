@@ -24,8 +24,6 @@ from typing import Any
 
 import numpy as np
 
-from app.ocslam.se2 import Pose2
-
 log = logging.getLogger(__name__)
 
 RATES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
@@ -246,7 +244,7 @@ class ReplayApp:
                 self.player.pause()
             time.sleep(0.05)
 
-    def start(self) -> "ReplayApp":
+    def start(self) -> ReplayApp:
         self._refresh(with_map=True)
         self._thread = threading.Thread(target=self._run, name="ocslam-replay", daemon=True)
         self._thread.start()

@@ -49,13 +49,14 @@ from app.ocslam.association import associate, bearing_match, sighting
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.footprint import NO_KEYFRAME, Footprint, ObjectEvidence
+from app.ocslam.footprint import NO_KEYFRAME, Footprint
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
 from app.ocslam.projection import CameraModel, assign_points, bounding_areas, camera_bound, seed_camera_projection
 from app.ocslam.se2 import Pose2
 from app.ocslam.seed import SeedConsciousness
+from app.ocslam.track_state import tracks_from_state, tracks_state
 from app.ocslam.tracks import Sighting, Track, angle_wrap, create_track, credit_track, export_track, grid_free_fn, update_track
 
 FloatArray = NDArray[np.float64]
@@ -184,29 +185,7 @@ class Consciousness:
             "mode": self._mode,
             "next_id": self._next_id,
             "keyframes": {str(k): list(v) for k, v in self._kf_poses.items()},
-            "tracks": [
-                {
-                    "id": t.id,
-                    "label": t.label,
-                    "presence": t.presence,
-                    "frames": t.frames,
-                    "confidence": t.confidence,
-                    "source": t.source,
-                    "created": t.created,
-                    "last_seen": t.last_seen,
-                    "last_frame_stamp": t.last_frame_stamp,
-                    "detections": t.detections,
-                    "misses": t.misses,
-                    "complete_views": t.complete_views,
-                    "conf": [t.conf_sum, t.conf_n, t.conf_best],
-                    "footprint": None
-                    if t.footprint is None
-                    else [float(t.footprint.center[0]), float(t.footprint.center[1]), float(t.footprint.yaw),
-                          float(t.footprint.size_x), float(t.footprint.size_y)],
-                    "evidence": t.evidence.state_dict(),
-                }
-                for t in self._tracks
-            ],
+            "tracks": tracks_state(self._tracks),
             "seed": self._seed.state_dict(),
         }
 
@@ -216,36 +195,7 @@ class Consciousness:
             mode = str(d.get("mode", "improved"))
             if mode not in ("seed", "improved"):
                 raise ValueError(f"unknown mode {mode!r}")
-            tracks = []
-            for td in d.get("tracks", []):
-                label = str(td["label"])
-                if label not in CLASS_NAMES:
-                    raise ValueError(f"unknown class {label!r}")
-                t = Track(
-                    id=int(td["id"]),
-                    label=label,
-                    presence=float(td["presence"]),
-                    frames=int(td["frames"]),
-                    confidence=float(td["confidence"]),
-                    source=str(td.get("source", "lidar_island")),
-                    evidence=ObjectEvidence.from_state_dict(td["evidence"]),
-                    created=float(td.get("created", 0.0)),
-                    last_seen=float(td.get("last_seen", 0.0)),
-                    last_frame_stamp=float(td.get("last_frame_stamp", 0.0)),
-                    detections=int(td.get("detections", 1)),
-                    misses=int(td.get("misses", 0)),
-                    complete_views=int(td.get("complete_views", 0)),
-                )
-                conf = td.get("conf")
-                if conf is not None and len(conf) == 3 and all(math.isfinite(float(v)) for v in conf):
-                    t.conf_sum, t.conf_n, t.conf_best = float(conf[0]), int(conf[1]), float(conf[2])
-                fp = td.get("footprint")
-                if fp is not None and len(fp) == 5 and all(math.isfinite(float(v)) for v in fp):
-                    # as estimated live (with the occupancy grid then at hand)
-                    t.footprint = Footprint(np.array([float(fp[0]), float(fp[1])]), float(fp[2]), float(fp[3]), float(fp[4]))
-                else:
-                    t.refresh()
-                tracks.append(t)
+            tracks = tracks_from_state(d.get("tracks", []))
             kfs = {int(k): Pose2.from_array(v) for k, v in d.get("keyframes", {}).items()}
             seed = SeedConsciousness()
             seed.load_state_dict(d.get("seed", {}))

@@ -74,6 +74,9 @@ class OcslamApp:
         self._install_scene_click()
         self._set_initial_camera()
         self._stop = threading.Event()
+        #: the rosbag2 recorder of the running pipeline (Session panel's Record toggle, ``run --record``)
+        self.recorder: Any = None
+        self.recording_path: Path | None = None
         self._thread = threading.Thread(target=self._loop, name="ocslam-loop", daemon=True)
         self.loop_error: str | None = None
         self.server.on_client_connect(self._on_connect)
@@ -101,6 +104,7 @@ class OcslamApp:
         try:
             self.server.stop()
         finally:
+            self._finish_recording(self.pipeline)
             self.pipeline.close()
         if self._world_loading.acquire(timeout=30):  # a world that finished loading after the loop stopped
             self._world_loading.release()
@@ -312,6 +316,9 @@ class OcslamApp:
                     self._pending_pipeline = None
                     self.cfg.sim.world = choice
                     old = self.pipeline
+                    bag = self._finish_recording(old)
+                    if bag is not None:
+                        self.notify(client, "Recording stopped", f"the world changed; bag {self._shown(bag)}", "blue")
                     self.pipeline = new
                     self.layers.pipeline = new
                     self.layers.rebuild_world()
@@ -358,6 +365,57 @@ class OcslamApp:
             self.notify(client, "Session saved", self._shown(out), "green")
 
         self.submit(apply, client=client, what="Session not saved")
+
+    def start_recording(self, path: str | Path, *, client: Any = None, confined: bool = True) -> None:
+        """Record the running pipeline as a rosbag2 MCAP bag folder (``path``: a new folder under the runs
+        directory when named from the GUI; ``ocslam run --record`` names any path, ``confined=False``)."""
+        try:
+            target = self.gui_path(path, "Record") if confined else Path(path).absolute()
+            if target.exists():
+                raise PathRefused(f"Record: {self._shown(target)} exists (a bag is never overwritten)")
+        except PathRefused as e:
+            self.panels.set_recording_state(False)
+            return self._refuse(client, "Not recording", e)
+
+        def apply(p: Any) -> None:
+            from app.ros2.recorder import attach
+
+            if self.recorder is not None:
+                return
+            try:
+                self.recorder, self.recording_path = attach(p, target), target
+            except Exception:
+                self.panels.set_recording_state(False)
+                raise
+            self.panels.session_status.content = f"recording to `{self._shown(target)}` since sim {p.time:.1f} s"
+            self.notify(client, "Recording", f"rosbag2 MCAP bag {self._shown(target)}", "green")
+
+        self.submit(apply, client=client, what="Not recording")
+
+    def stop_recording(self, *, client: Any = None) -> None:
+        def apply(p: Any) -> None:
+            bag = self._finish_recording(p)
+            if bag is not None:
+                self.panels.session_status.content = f"bag written to `{self._shown(bag)}` at sim {p.time:.1f} s"
+                self.notify(client, "Recording stopped", f"bag {self._shown(bag)} (ros2 bag info / Foxglove)", "green")
+
+        self.submit(apply, client=client, what="Recording not finished")
+
+    def _finish_recording(self, pipeline: Any) -> Path | None:
+        """Close the bag of ``pipeline`` if it is being recorded (idempotent); the bag's folder."""
+        rec, path = self.recorder, self.recording_path
+        if rec is None:
+            return None
+        from app.ros2.recorder import detach
+
+        try:
+            detach(pipeline, rec)
+        except Exception as e:
+            log.warning("recording not finished: %s", e)
+        finally:
+            self.recorder = self.recording_path = None  # only once the bag is complete
+        self.panels.set_recording_state(False)
+        return path
 
     def load_session(self, path: str, *, client: Any = None) -> None:
         try:
@@ -459,10 +517,16 @@ def project_path(p: str | Path) -> Path:
     return Path(os.path.realpath(path if path.is_absolute() else PROJECT_ROOT / path))
 
 
-def serve(cfg: Config) -> int:
-    """``ocslam run``: start the web app and block until Ctrl-C."""
+def serve(cfg: Config, *, record: str | None = None) -> int:
+    """``ocslam run``: start the web app and block until Ctrl-C. ``record``: a bag folder to record the run
+    into (``""``: a new ``recording-<date>`` folder under the runs directory); the bag is finished on exit."""
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     app = OcslamApp(cfg).start()
+    if record is not None:
+        target = Path(record) if record else app.runs_root / time.strftime("recording-%Y%m%d-%H%M%S")
+        app.panels.set_recording_state(True)
+        app.start_recording(target, confined=False)
+        print(f"recording a rosbag2 bag to {target}", flush=True)
     print(f"OCSLAM is running: open {app.url} in your browser (Ctrl-C stops)", flush=True)
     if not is_loopback(cfg.server.host):
         if app.token:

@@ -111,3 +111,38 @@ def test_metrics_panel_names_the_renderer_and_the_loop_closures(app) -> None:
     assert "TinyRenderer" in text and "camera " in text
     assert "accepted" in text and "rejected" in text
     assert app.pipeline.sim.renderer == "tiny" and app.loop_error is None
+
+
+def test_record_toggle_writes_a_rosbag2_bag_under_the_runs_directory(tmp_path) -> None:
+    """Session panel → Record: a bag folder (metadata.yaml + .mcap) that rosbags reads; an existing folder or
+    a path out of the runs directory is refused and the toggle falls back off."""
+    from rosbags.highlevel import AnyReader
+
+    cfg = Config.load(None, [*BASE, f"server.runs_dir={tmp_path}"])
+    (tmp_path / "taken").mkdir()
+    a = OcslamApp(cfg).start()
+    c = FakeViserClient(a.port).connect()
+    try:
+        for bad in ("taken", "../outside"):
+            c.set_value("Bag folder", bad)
+            wait_for(lambda: a.panels.record_path.value == bad, what="the folder text")
+            c.set_value("Record (rosbag2 MCAP)", True)
+            wait_for(lambda: not a.panels.record_toggle.value and a.recorder is None, what="a refused recording")
+        assert not (tmp_path.parent / "outside").exists()
+        c.set_value("Bag folder", "drive")
+        wait_for(lambda: a.panels.record_path.value == "drive", what="the folder text")
+        c.set_value("Record (rosbag2 MCAP)", True)
+        wait_for(lambda: a.recorder is not None, timeout=60, what="the recorder to start")
+        t0 = a.pipeline.time
+        wait_for(lambda: a.pipeline.time > t0 + 2.0, timeout=60, what="two recorded sim seconds")
+        c.set_value("Record (rosbag2 MCAP)", False)
+        wait_for(lambda: a.recorder is None, timeout=60, what="the bag to be finished")
+        bag = tmp_path / "drive"
+        assert (bag / "metadata.yaml").is_file() and list(bag.glob("*.mcap")), sorted(tmp_path.rglob("*"))
+        with AnyReader([bag]) as reader:
+            counts = {con.topic: con.msgcount for con in reader.connections}
+        assert counts.get("/scan", 0) >= 5 and counts.get("/odom", 0) >= 5 and counts.get("/tf_static", 0) >= 1
+        assert a.loop_error is None
+    finally:
+        c.close()
+        a.stop()

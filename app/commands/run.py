@@ -57,7 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with a non-loopback --host: no access token (anyone who can reach the port drives the robot)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--record", nargs="?", const="", default=None, metavar="BAG",
-                   help="headless: record a rosbag2 MCAP bag folder (default: <out>/bag); docs/ros2.md")
+                   help="record a rosbag2 MCAP bag folder (headless default: <out>/bag; web app default: "
+                        "runs/recording-<date>; or the Session panel's Record toggle); docs/ros2.md")
 
 
 def check_duration(duration: float | None, what: str = "--duration") -> float | None:
@@ -81,12 +82,9 @@ def run(args: argparse.Namespace) -> int:
     if args.headless:
         return run_headless(cfg, route=args.route, explore=args.explore, duration=args.duration, out=args.out,
                             quiet=args.quiet, record=args.record)
-    if args.record is not None:
-        print("ocslam: warning: --record records headless runs only (the web app's Record toggle is not wired yet)",
-              file=sys.stderr)
     from app.server import serve
 
-    return serve(cfg)
+    return serve(cfg, record=args.record)
 
 
 def run_headless(

@@ -333,10 +333,34 @@ class Panels:
         b.on_click(lambda ev: self.app.save_session(self.session_path.value, client=ev.client))
         b = gui.add_button("Load session", icon=viser.Icon.FOLDER_OPEN, hint="restore map, objects and pose graph")
         b.on_click(lambda ev: self.app.load_session(self.session_path.value, client=ev.client))
+        self.record_path = gui.add_text("Bag folder", "runs/recording",
+                                        hint="a new folder under the runs directory (never overwritten)")
+        self.record_toggle = gui.add_checkbox("Record (rosbag2 MCAP)", False,
+                                              hint="/scan /odom /tf /camera /yolo_boxes /objects /map …: docs/ros2.md")
+        self.record_toggle.on_update(self._on_record_toggle)
         self.map_path = gui.add_text("Map file", "runs/map.yaml")
         b = gui.add_button("Export map", icon=viser.Icon.DOWNLOAD, hint="map_server / Nav2 YAML + PGM")
         b.on_click(lambda ev: self.app.export_map(self.map_path.value, client=ev.client))
         self.session_status = gui.add_markdown("")
+
+    def _on_record_toggle(self, ev: Any) -> None:
+        if self._setting_record:
+            return
+        if self.record_toggle.value:
+            self.app.start_recording(self.record_path.value, client=ev.client)
+        else:
+            self.app.stop_recording(client=ev.client)
+
+    def set_recording_state(self, on: bool) -> None:
+        """Show the recorder's state on the toggle without acting on it."""
+        if self.record_toggle.value != on:
+            self._setting_record = True
+            try:
+                self.record_toggle.value = on
+            finally:
+                self._setting_record = False
+
+    _setting_record = False
 
     # ------------------------------------------------------------------------------------------
     # periodic update (loop thread)

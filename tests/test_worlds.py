@@ -286,12 +286,7 @@ def test_documented_example_and_bundled_worlds_are_valid():
     assert {o.label for o in w.objects} == {"dog", "chair", "door", "ball"}
     for f in sorted(Path("assets/worlds").glob("*.yaml")):
         load_world(f)
-    try:
-        validate_world(w)
-    except WorldError as e:  # the example shows one wall of its room; objects must now be inside the walls
-        if "the walls enclose no area" in str(e):
-            pytest.xfail("docs/world-format.md's example has one wall only: it needs its room's other walls (issue 12 item 9)")
-        raise
+    validate_world(w)  # objects and the start inside the example room's walls
 
 
 from hypothesis import given, settings

@@ -22,6 +22,12 @@ def commands(quick: bool) -> list[list[str]]:
         for det in ("oracle", "yolo"):
             cmds.append(["objects", "--mode", mode, "--detector", det])
     cmds.append(["objects", "--worlds", "3" if quick else "10", "--detector", "yolo"])
+    if not quick:  # the world zoo (dev: tuned on; test: only reported) and the random layout families
+        for suite in ("zoo-dev", "zoo-test", "random"):
+            for det in ("oracle", "yolo"):
+                cmds.append(["objects", "--suite", suite, "--detector", det])
+        cmds.append(["slam", "--suite", "synthetic"])
+    cmds.append(["loop", "--record"] + (["--duration", "30"] if quick else []))
     return cmds
 
 

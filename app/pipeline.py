@@ -142,6 +142,8 @@ class StageJobs:
         self._det = ThreadPoolExecutor(1, thread_name_prefix="ocslam-detector") if self.parallel else None
         self._est = ThreadPoolExecutor(1, thread_name_prefix="ocslam-estimators") if self.parallel else None
         self._pending: deque[Future] = deque()
+        #: guards ``_pending``: the loop thread and the GUI's threads all wait for the jobs in flight
+        self._lock = threading.Lock()
         self._threads: set[int] = set()
 
     @staticmethod
@@ -168,8 +170,9 @@ class StageJobs:
     def estimate(self, fn: Callable[..., Any], *args: Any) -> Future:
         if self._est is None:
             return self._inline(fn, *args)
-        f = self._est.submit(self._wrap(fn), *args)
-        self._pending.append(f)
+        with self._lock:  # submitted and queued together, so the queue keeps the jobs' order
+            f = self._est.submit(self._wrap(fn), *args)
+            self._pending.append(f)
         return f
 
     def in_worker(self) -> bool:
@@ -179,19 +182,25 @@ class StageJobs:
         """Wait for every estimator job submitted so far (a no-op on a worker thread or inline)."""
         if self._est is None or self.in_worker():
             return
-        while self._pending:
-            f = self._pending[0]
+        while True:
+            with self._lock:
+                if not self._pending:
+                    return
+                f = self._pending[0]
             try:
                 f.result()
             except Exception:  # jobs log their own errors
                 pass
-            self._pending.popleft()
+            with self._lock:  # another waiter may have dropped it already
+                if self._pending and self._pending[0] is f:
+                    self._pending.popleft()
 
     def busy(self) -> int:
         """Estimator jobs not finished yet."""
-        while self._pending and self._pending[0].done():
-            self._pending.popleft()
-        return sum(not f.done() for f in self._pending)
+        with self._lock:
+            while self._pending and self._pending[0].done():
+                self._pending.popleft()
+            return sum(not f.done() for f in self._pending)
 
     def close(self) -> None:
         self.join()

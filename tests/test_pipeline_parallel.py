@@ -122,3 +122,36 @@ def test_stage_jobs_run_in_order_on_their_threads_or_inline():
             assert jobs.busy() == 0
         finally:
             jobs.close()
+
+
+def test_stage_jobs_can_be_waited_for_from_many_threads_at_once():
+    """The loop thread and the GUI's threads wait for the jobs in flight together (``pipe.slam`` from a
+    panel while the loop reads ``pipe.consciousness``): no waiter may drop another's job (this raised
+    'pop from an empty deque' in the loop of the live app)."""
+    jobs = StageJobs(True)
+    errors: list[BaseException] = []
+    done = [0]
+    stop = threading.Event()
+
+    def waiter() -> None:
+        while not stop.is_set():
+            try:
+                jobs.join()
+                jobs.busy()
+            except BaseException as e:  # noqa: BLE001
+                errors.append(e)
+                return
+
+    threads = [threading.Thread(target=waiter) for _ in range(4)]
+    for t in threads:
+        t.start()
+    try:
+        for _ in range(400):
+            jobs.estimate(lambda: done.__setitem__(0, done[0] + 1))
+        jobs.join()
+    finally:
+        stop.set()
+        for t in threads:
+            t.join()
+        jobs.close()
+    assert errors == [] and done[0] == 400 and jobs.busy() == 0

@@ -66,6 +66,26 @@ def _scores(grid: NDArray[np.float32], rows, cols, a, ox, oy) -> NDArray[np.floa
     return grid.reshape(-1)[r].mean(axis=1, dtype=np.float64)
 
 
+def _search_lattice(fld: MatchField, pts: NDArray[np.float64], center: NDArray[np.float64], window_xy_m: float,
+                    window_yaw_rad: float, yaw_step_rad: float):
+    """The branch-and-bound lattice around ``center``: ``(res, w, yaws, rows, cols, A, top)`` — cell size,
+    half-window in cells, the ``A`` candidate yaws, the rotated points' cells per yaw, and the coarsest
+    precomputed level ``top`` (``fld``'s levels are built up to it); None without points."""
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    if len(pts) == 0:
+        return None
+    res = fld.resolution
+    w = int(math.ceil(window_xy_m / res - 1e-9))
+    nA = int(math.floor(window_yaw_rad / yaw_step_rad + 1e-9)) if yaw_step_rad > 0 else 0
+    yaws = center[2] + np.arange(-nA, nA + 1) * yaw_step_rad
+    rows, cols = _rotated_cells(fld, pts, center[:2], yaws)
+    top = 0
+    while 2 ** (top + 1) <= w and top < 8:
+        top += 1
+    fld.ensure_levels(top)
+    return res, w, yaws, rows, cols, len(yaws), top
+
+
 def correlative_search(
     fld: MatchField,
     pts: NDArray[np.float64],
@@ -80,19 +100,10 @@ def correlative_search(
     The lattice is ``center + (i·res, j·res, k·yaw_step)`` for ``|i·res| ≤ window_xy_m``,
     ``|k·yaw_step| ≤ window_yaw_rad``.
     """
-    pts = np.asarray(pts, np.float64).reshape(-1, 2)
-    if len(pts) == 0:
+    lattice = _search_lattice(fld, pts, center, window_xy_m, window_yaw_rad, yaw_step_rad)
+    if lattice is None:
         return None
-    res = fld.resolution
-    w = int(math.ceil(window_xy_m / res - 1e-9))
-    nA = int(math.floor(window_yaw_rad / yaw_step_rad + 1e-9)) if yaw_step_rad > 0 else 0
-    yaws = center[2] + np.arange(-nA, nA + 1) * yaw_step_rad
-    rows, cols = _rotated_cells(fld, pts, center[:2], yaws)
-    A = len(yaws)
-    top = 0
-    while 2 ** (top + 1) <= w and top < 8:
-        top += 1
-    fld.ensure_levels(top)
+    res, w, yaws, rows, cols, A, top = lattice
     step = 2**top
     offs = np.arange(-w, w + 1, step)
     a, ox, oy = np.meshgrid(np.arange(A), offs, offs, indexing="ij")
@@ -162,19 +173,10 @@ def competitor(
     pruned. Greedy dives from the ``dives`` best top-level regions usually find a competitor at once
     where there is one (a corridor, a periodic façade); the breadth-first search proves there is none.
     """
-    pts = np.asarray(pts, np.float64).reshape(-1, 2)
-    if len(pts) == 0:
+    lattice = _search_lattice(fld, pts, center, window_xy_m, window_yaw_rad, yaw_step_rad)
+    if lattice is None:
         return None
-    res = fld.resolution
-    w = int(math.ceil(window_xy_m / res - 1e-9))
-    nA = int(math.floor(window_yaw_rad / yaw_step_rad + 1e-9)) if yaw_step_rad > 0 else 0
-    yaws = center[2] + np.arange(-nA, nA + 1) * yaw_step_rad
-    rows, cols = _rotated_cells(fld, pts, center[:2], yaws)
-    A = len(yaws)
-    top = 0
-    while 2 ** (top + 1) <= w and top < 8:
-        top += 1
-    fld.ensure_levels(top)
+    res, w, yaws, rows, cols, A, top = lattice
     bi = (best[0] - center[0]) / res
     bj = (best[1] - center[1]) / res
     r = exclude_m / res

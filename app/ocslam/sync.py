@@ -100,14 +100,19 @@ def reproject_scan(scan: LaserScan, T_base_scan: Pose2, T_now_then: Pose2, stamp
     frame at ``stamp``. Points are re-binned into the same beam layout (nearest return per beam);
     beams left without a return become ``inf``.
     """
+    pts = scan.points()
+    T = T_base_scan.inverse() @ T_now_then @ T_base_scan
+    return replace(scan, ranges=bin_to_beams(scan, T.transform_points(pts) if len(pts) else pts), stamp=stamp)
+
+
+def bin_to_beams(scan: LaserScan, points: np.ndarray) -> np.ndarray:
+    """Ranges in ``scan``'s beam layout for ``(N, 2)`` points in its sensor plane: the nearest point per
+    beam, ``inf`` (no return) for beams that receive none."""
     n = len(scan.ranges)
     out = np.full(n, np.inf)
-    pts = scan.points()
-    if len(pts) and n:
-        T = T_base_scan.inverse() @ T_now_then @ T_base_scan
-        q = T.transform_points(pts)
-        r = np.hypot(q[:, 0], q[:, 1])
-        a = np.arctan2(q[:, 1], q[:, 0])
+    if len(points) and n:
+        r = np.hypot(points[:, 0], points[:, 1])
+        a = np.arctan2(points[:, 1], points[:, 0])
         full_circle = abs(scan.angle_increment) * n >= 2 * np.pi - 1e-6
         d = np.mod(a - scan.angle_min, 2 * np.pi) if full_circle else se2.wrap_angle(a - scan.angle_min)
         idx = np.rint(d / scan.angle_increment).astype(np.int64)
@@ -115,4 +120,4 @@ def reproject_scan(scan: LaserScan, T_base_scan: Pose2, T_now_then: Pose2, stamp
             idx %= n
         ok = (idx >= 0) & (idx < n)
         np.minimum.at(out, idx[ok], r[ok])
-    return replace(scan, ranges=out, stamp=stamp)
+    return out

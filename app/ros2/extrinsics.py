@@ -17,9 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from app.ocslam import se2
 from app.ocslam.messages import LaserScan
 from app.ocslam.se2 import Pose2
+from app.ocslam.sync import bin_to_beams
 
 FloatArray = NDArray[np.float64]
 
@@ -63,25 +63,13 @@ def level_scan(scan: LaserScan, T_base_scan: FloatArray) -> tuple[LaserScan, Pos
     T_base_level = planar_mount(T)
     if is_level(T):
         return scan, T_base_level
-    n = len(scan.ranges)
-    out = np.full(n, np.inf)
     m = scan.valid_mask()
     r = np.asarray(scan.ranges, dtype=np.float64)[m]
     a = scan.angles[m]
-    if len(r) and n:
-        local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
-        base = local @ T[:3, :3].T  # directions in the base frame (translation handled by the level frame)
-        c, s = math.cos(T_base_level.yaw), math.sin(T_base_level.yaw)
-        lx = c * base[:, 0] + s * base[:, 1]
-        ly = -s * base[:, 0] + c * base[:, 1]
-        rr = np.hypot(lx, ly)
-        aa = np.arctan2(ly, lx)
-        full = abs(scan.angle_increment) * n >= 2 * math.pi - 1e-6
-        d = np.mod(aa - scan.angle_min, 2 * math.pi) if full else se2.wrap_angle(aa - scan.angle_min)
-        idx = np.rint(d / scan.angle_increment).astype(np.int64)
-        if full:
-            idx %= n
-        ok = (idx >= 0) & (idx < n)
-        np.minimum.at(out, idx[ok], rr[ok])
+    local = np.stack([r * np.cos(a), r * np.sin(a), np.zeros_like(r)], axis=1)
+    base = local @ T[:3, :3].T  # directions in the base frame (translation handled by the level frame)
+    c, s = math.cos(T_base_level.yaw), math.sin(T_base_level.yaw)
+    level = np.stack([c * base[:, 0] + s * base[:, 1], -s * base[:, 0] + c * base[:, 1]], axis=1)
     # beams that had no return keep "no return" (inf) so free space is still cleared along them
+    out = bin_to_beams(scan, level)
     return replace(scan, ranges=out, frame_id=scan.frame_id + "_level"), T_base_level

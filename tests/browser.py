@@ -45,15 +45,17 @@ def browser_page(url: str, *, pages: int = 1) -> Iterator[list]:
         browser = pw.chromium.launch(executable_path=exe, args=CHROMIUM_FLAGS)
         try:
             context = browser.new_context(viewport=VIEWPORT)
-            out = []
-            for _ in range(pages):
-                page = context.new_page()
-                page.goto(url, wait_until="domcontentloaded")
-                page.wait_for_selector("canvas", timeout=60_000)
-                out.append(page)
-            yield out
+            yield [open_page(context, url) for _ in range(pages)]
         finally:
             browser.close()
+
+
+def open_page(context, url: str):
+    """A new page of ``context`` on ``url``, once viser's canvas is there."""
+    page = context.new_page()
+    page.goto(url, wait_until="domcontentloaded")
+    page.wait_for_selector("canvas", timeout=60_000)
+    return page
 
 
 def wait_for(cond: Callable[[], bool], timeout: float = 20.0, interval: float = 0.1, what: str = "condition") -> None:

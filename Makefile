@@ -13,7 +13,8 @@ PYTEST_ARGS ?=
 
 help:
 	@echo "make run    set up .venv and start the web app on http://$(HOST):$(PORT)"
-	@echo "make test   set up .venv (+ test extras, chromium) and run the whole suite"
+	@echo "make test   set up .venv (+ test extras, chromium), run make lint and the whole suite"
+	@echo "make lint   ruff on app/ tests/ scripts/, mypy on app/ocslam"
 	@echo "make bench  run every benchmark and print the tables"
 	@echo "make train  install the [train] extra and train the detector (about an hour)"
 
@@ -77,7 +78,7 @@ egl:
 	  echo "      (the camera falls back to pybullet's slower TinyRenderer without it)."; \
 	fi
 
-test: $(VENV)/.installed-test browser strace egl
+test: $(VENV)/.installed-test browser strace egl lint
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 test-fast: $(VENV)/.installed-test egl
@@ -90,10 +91,10 @@ train: setup
 	$(PIP) install --quiet -e ".[train]"
 	$(OCSLAM) train-detector $(ARGS)
 
+# Style and types: ruff on everything, mypy on the pure core (both pinned in the [test] extra).
 lint: $(VENV)/.installed-test
-	$(PY) -m pip install --quiet ruff mypy
-	$(VENV)/bin/ruff check app tests
-	$(VENV)/bin/mypy app/ocslam --ignore-missing-imports
+	$(VENV)/bin/ruff check app tests scripts
+	$(VENV)/bin/mypy app/ocslam
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -256,7 +256,7 @@ class Pipeline:
         belongs to the thread that made it; the camera's render process keeps EGL)."""
         from app.ocslam.consciousness import Consciousness
         from app.ocslam.slam import Slam
-        from app.robot_model import RobotModel
+        from app.sim.robot_model import RobotModel
         from app.sim_world import SimWorld
         from app.worlds import load_world
 
@@ -292,7 +292,7 @@ class Pipeline:
         self.camera_worker = None
         self.renderer, self.renderer_note = self.sim.renderer, self.sim.renderer_note
         if render_process:
-            from app.render_worker import CameraWorker
+            from app.sim.render_worker import CameraWorker
 
             try:
                 self.camera_worker = CameraWorker(self.world, cfg, seed=cfg.sim.seed, warmup=camera_render_size(cfg))
@@ -615,7 +615,7 @@ class Pipeline:
                 self._camera_trigger()
         w = self.camera_worker
         if w is not None and w.pending and t + 1e-9 >= w.oldest_stamp() + self.cfg.camera.latency_s:
-            from app.render_worker import CameraWorkerError
+            from app.sim.render_worker import CameraWorkerError
 
             try:
                 with self.timer.time("render"):  # only the time spent waiting for the render process

@@ -428,7 +428,7 @@ class SessionData:
         """The object tracker rebuilt from the state (checked: finite poses, sizes and presences)."""
         if camera_model is None:
             from app.pipeline import build_camera_model
-            from app.robot_model import RobotModel
+            from app.sim.robot_model import RobotModel
 
             camera_model = build_camera_model(self.cfg, RobotModel.load())
         return restore_consciousness(self.path, cons_cfg if cons_cfg is not None else self.cfg.consciousness,

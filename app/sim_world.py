@@ -53,7 +53,7 @@ from app.config import Config
 from app.ocslam.messages import CameraInfo, GroundTruthObject, GroundTruthObstacle, Image, LaserScan, Twist, WheelEncoders
 from app.ocslam.odometry import twist_to_wheel_rates
 from app.ocslam.se2 import Pose2, wrap_angle
-from app.robot_model import RobotModel
+from app.sim.robot_model import RobotModel
 from app.world_models import build_model_pybullet, get_model, resolve_colors
 from app.worlds import World
 

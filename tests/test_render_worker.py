@@ -7,7 +7,7 @@ import pytest
 
 from app.config import Config
 from app.ocslam.se2 import Pose2
-from app.render_worker import CameraWorker
+from app.sim.render_worker import CameraWorker
 from app.sim_world import SimWorld
 from app.worlds import load_world
 from app.config import resolve_path

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from app.config import Config
 from app.ocslam.messages import CameraInfo
 from app.ocslam.se2 import Pose2
-from app.robot_model import DEFAULT_URDF, RobotModel, RobotModelError, frame_transform
+from app.sim.robot_model import DEFAULT_URDF, RobotModel, RobotModelError, frame_transform
 
 ROBOT = RobotModel.load()
 URDF_TEXT = DEFAULT_URDF.read_text()

@@ -108,7 +108,7 @@ def test_frame_ids(messages):
 
 
 def test_static_transforms_are_the_robot_model(messages):
-    from app.robot_model import RobotModel
+    from app.sim.robot_model import RobotModel
     from app.ros2.convert import transform_to_matrix
     from app.ros2.reader import compose_static
 

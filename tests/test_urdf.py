@@ -12,7 +12,7 @@ import pytest
 import yourdfpy
 
 from app.ocslam.messages import CameraInfo
-from app.robot_model import DEFAULT_URDF, RobotModel, link_poses
+from app.sim.robot_model import DEFAULT_URDF, RobotModel, link_poses
 
 ROOT = Path(__file__).resolve().parents[1]
 MESH_DIR = ROOT / "assets" / "meshes" / "turtlebot3"

@@ -97,7 +97,7 @@ class ReplayCore:
         from app.ocslam.consciousness import Consciousness
         from app.ocslam.projection import CameraModel
         from app.ocslam.slam import Slam
-        from app.robot_model import RobotModel
+        from app.sim.robot_model import RobotModel
 
         self.cfg = cfg
         self.bag = bag

@@ -50,7 +50,7 @@ def param(
         "length": length,
     }
     if isinstance(default, (list, dict, set)):
-        return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
+        return field(default_factory=lambda: type(default)(default), metadata=meta)
     return field(default=default, metadata=meta)
 
 
@@ -89,7 +89,7 @@ def coerce_value(section: str, f: dataclasses.Field, value: Any) -> Any:
         elif ftype is str:
             if not isinstance(value, str):
                 raise ValueError(value)
-        elif ftype in (list, tuple) or (default is None and f.default_factory is not dataclasses.MISSING):  # type: ignore[misc]
+        elif ftype in (list, tuple) or (default is None and f.default_factory is not dataclasses.MISSING):
             if isinstance(value, tuple):
                 value = list(value)
             if not isinstance(value, list):

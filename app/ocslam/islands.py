@@ -48,7 +48,7 @@ class Island:
         geom = MultiPoint(self.points).buffer(self.buffer_m, quad_segs=4)
         if isinstance(geom, Polygon):
             return geom
-        return geom.convex_hull  # type: ignore[return-value]
+        return geom.convex_hull
 
     @property
     def centroid(self) -> FloatArray:

@@ -110,7 +110,7 @@ class CostMap:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.traversable.shape  # type: ignore[return-value]
+        return self.traversable.shape
 
     def to_cells(self, points_xy: ArrayLike) -> NDArray[np.int64]:
         """``(N, 2)`` points in the map frame → ``(N, 2)`` crop ``(row, col)`` (may be out of bounds)."""

@@ -182,10 +182,11 @@ def decode_output(
     if len(boxes) == 0:
         return np.zeros((0, 4)), np.zeros(0), np.zeros(0, dtype=np.int64)
     xywh = np.concatenate([boxes[:, :2], boxes[:, 2:] - boxes[:, :2]], axis=1)
-    idx = cv2.dnn.NMSBoxesBatched(
-        xywh, score.astype(np.float32), cls.astype(np.int32), float(confidence), float(nms_iou)
+    # cv2's stub lists only Sequence[Rect2d]; NMSBoxesBatched takes the (N, 4) array as it is
+    kept = cv2.dnn.NMSBoxesBatched(
+        xywh, score.astype(np.float32), cls.astype(np.int32), float(confidence), float(nms_iou)  # type: ignore[arg-type]
     )
-    idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+    idx = np.asarray(kept, dtype=np.int64).reshape(-1)
     idx = idx[np.argsort(-score[idx], kind="stable")][:max_det]
     return boxes[idx], score[idx], cls[idx]
 
@@ -402,7 +403,7 @@ class Detector:
         rgb = _as_rgb(rgb)
         key = (rgb.shape[1], rgb.shape[0])
         with self._lock:
-            if self._blob_key != key:
+            if self._blob is None or self._blob_key != key:
                 w_in, h_in = self.input_size_for(*key)
                 self._blob = np.full((1, 3, h_in, w_in), np.float32(PAD_VALUE / 255.0), np.float32)
                 self._blob_key = key

@@ -34,6 +34,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 import shapely
+from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 from shapely.geometry import Point, Polygon
 
@@ -116,7 +117,8 @@ def evaluate_objects(
             if o.label != t.label:
                 continue
             d = float(np.hypot(*(o_xy[i] - t_xy[j])))
-            inside = t_polys[j] is not None and t_polys[j].covers(Point(o_xy[i]))
+            tp = t_polys[j]
+            inside = tp is not None and tp.covers(Point(o_xy[i]))
             if inside or d <= match_radius_m:
                 cost[i, j] = d
     matched_obj: dict[int, int] = {}
@@ -156,16 +158,17 @@ def evaluate_objects(
 
     obstacle_polys = [p for p in (_polygon(o.footprint) for o in obstacles) if p is not None]
     obstacle_union = shapely.union_all(obstacle_polys) if obstacle_polys else None
+    known_polys = [(j, tp) for j, tp in enumerate(t_polys) if tp is not None]
     for i, o in enumerate(shown):
         if i in matched_obj:
             continue
         pt = Point(o_xy[i])
         cause = "other"
-        same = [j for j, t in enumerate(truth) if t.label == o.label and t_polys[j] is not None and t_polys[j].distance(pt) <= touch_m]
+        same = [j for j, tp in known_polys if truth[j].label == o.label and tp.distance(pt) <= touch_m]
         if same:
             cause = "legs"
         else:
-            other = [j for j, t in enumerate(truth) if t.label != o.label and t_polys[j] is not None and t_polys[j].distance(pt) <= touch_m]
+            other = [j for j, tp in known_polys if truth[j].label != o.label and tp.distance(pt) <= touch_m]
             if other or (obstacle_union is not None and obstacle_union.distance(pt) <= touch_m):
                 cause = "corner"
         if cause == "legs":
@@ -366,15 +369,15 @@ class ObservationLog:
     :func:`explain_misses`). Filled frame by frame with :meth:`add_frame`; all in the map frame."""
 
     n: int
-    in_view: np.ndarray = field(default=None)  # type: ignore[assignment]
-    detected: np.ndarray = field(default=None)  # type: ignore[assignment]
-    lidar: np.ndarray = field(default=None)  # type: ignore[assignment]
+    in_view: NDArray[np.int64] = field(init=False)  # (n,) frames it was in the camera's view
+    detected: NDArray[np.int64] = field(init=False)  # (n,) frames a box of its class covered it
+    lidar: NDArray[np.int64] = field(init=False)  # (n,) frames such a box also held a LIDAR return on it
     frames: int = 0
 
     def __post_init__(self) -> None:
-        for k in ("in_view", "detected", "lidar"):
-            if getattr(self, k) is None:
-                setattr(self, k, np.zeros(self.n, dtype=np.int64))
+        self.in_view = np.zeros(self.n, dtype=np.int64)
+        self.detected = np.zeros(self.n, dtype=np.int64)
+        self.lidar = np.zeros(self.n, dtype=np.int64)
 
     def add_frame(
         self,
@@ -398,7 +401,7 @@ class ObservationLog:
         self.in_view += iv
         pts = np.zeros((0, 2)) if scan_points_map is None else np.asarray(scan_points_map, dtype=np.float64).reshape(-1, 2)
         pts = pts[np.all(np.isfinite(pts), axis=1)]
-        for j in np.nonzero(iv)[0]:
+        for j in np.flatnonzero(iv).tolist():
             t = truth[j]
             cols = image_columns(T_map_camera, t.footprint, fx, cx, width)
             hit = [(x1, x2) for lab, x1, x2 in boxes if lab == t.label and box_covers(cols, x1, x2)]
@@ -435,7 +438,7 @@ def explain_misses(
     owner: dict[int, str] = {}  # object id → what it stands for (matched truth name or "false positive")
     for r in report.rows:
         if r.get("object_id") is not None:
-            owner[int(r["object_id"])] = r.get("name") or r.get("class") if r.get("kind") == "truth" else f"a false {r.get('class')}"
+            owner[int(r["object_id"])] = str(r.get("name") or r.get("class")) if r.get("kind") == "truth" else f"a false {r.get('class')}"
     for j, (t, row) in enumerate(zip(truth, truth_rows)):
         if row.get("matched"):
             continue

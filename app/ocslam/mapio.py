@@ -182,9 +182,10 @@ def load_map(yaml_path: str | os.PathLike[str]) -> OccupancyGrid:
     else:
         import cv2
 
-        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-        if img is None:
+        decoded = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        if decoded is None:
             raise MapIOError(f"{ip}: unreadable image")
+        img = decoded
     v = img.astype(np.float64)
     p = v / 255.0 if negate else (255.0 - v) / 255.0
     if mode == "raw":

@@ -66,7 +66,7 @@ def area_candidate(
     if not pc.below_plane(z_lidar) and len(idx):
         islands = islands_linkage(pts[idx], idx, float(cfg.island_threshold_m))
         labels, extents = scan_clusters
-        if labels is not None:
+        if labels is not None and extents is not None:
             for isl in islands:
                 lab = np.unique(labels[isl.indices])
                 isl.full_extent = float(extents[lab[lab >= 0]].max()) if np.any(lab >= 0) else isl.extent

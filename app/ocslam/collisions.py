@@ -110,8 +110,11 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
         for b in live[i + 1 :]:
             if a.status == "collision" or b.status == "collision":
                 continue
+            fa, fb = a.footprint, b.footprint
+            if fa is None or fb is None:
+                continue  # never: `live` holds footprints only, and a merge keeps a's
             d = float(np.linalg.norm(a.center - b.center))
-            frac = overlap_fraction(a.footprint, b.footprint)  # type: ignore[arg-type]
+            frac = overlap_fraction(fa, fb)
             if a.label == b.label:
                 if d < thr or frac >= ov:
                     # one object seen through two boxes: a absorbs b
@@ -120,7 +123,7 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                     if len(a.points):
                         ev = ObjectEvidence()
                         ev.add_points(a.points)
-                        if a.ray_origin is not None:
+                        if a.ray_origin is not None and a.ray_dir is not None:
                             ev.add_ray(a.ray_origin, a.ray_dir, max(a.ray_weight, 0.2), apparent_width=a.apparent_width)
                         a.footprint = estimate_footprint(ev, prior(a.label)) or a.footprint
                     b.status = "collision"
@@ -157,13 +160,14 @@ def resolve_track_collisions(
         if a.id in removed or a.footprint is None:
             continue
         for b in list(tracks):
-            if b is a or b.id in removed or b.footprint is None:
+            fa, fb = a.footprint, b.footprint  # a's may be re-estimated by a merge, never unset
+            if b is a or b.id in removed or fa is None or fb is None:
                 continue
-            d = float(np.linalg.norm(a.footprint.center - b.footprint.center))
-            reach = 0.5 * (np.hypot(a.footprint.size_x, a.footprint.size_y) + np.hypot(b.footprint.size_x, b.footprint.size_y))
+            d = float(np.linalg.norm(fa.center - fb.center))
+            reach = 0.5 * (np.hypot(fa.size_x, fa.size_y) + np.hypot(fb.size_x, fb.size_y))
             if d > reach + thr:
                 continue
-            frac = overlap_fraction(a.footprint, b.footprint)
+            frac = overlap_fraction(fa, fb)
             if a.label == b.label:
                 same = d < thr or frac >= ov
                 if same and cfg.point_ownership and not one_instance(a, b):
@@ -175,9 +179,9 @@ def resolve_track_collisions(
                     gap = a.prior.length[2] if (a.partial_only or b.partial_only) else thr
                     same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=True)
                 if not same and (not a.evidence.has_points or not b.evidence.has_points):
-                    gp, other = (a, b) if not a.evidence.has_points else (b, a)
+                    (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)
                     if len(gp.evidence.ray_origin):
-                        same = along_ray_close(gp.evidence.ray_origin[-1], gp.footprint.center, other.footprint.center, thr)
+                        same = along_ray_close(gp.evidence.ray_origin[-1], gp_fp.center, other_fp.center, thr)
                 if same and co_observed(a, b):
                     same = False  # seen side by side through two boxes in one frame: two objects
                 if same:
@@ -196,8 +200,8 @@ def resolve_track_collisions(
                 sa, sb = shared_fractions(pa, pb, cfg)
                 if max(sa, sb) < float(cfg.shared_evidence_fraction):
                     continue
-                small, big = (a, b) if a.footprint.area <= b.footprint.area else (b, a)
-                if small.footprint.area < 0.5 * big.footprint.area and not small.partial_only:
+                (small, small_fp), (big, big_fp) = ((a, fa), (b, fb)) if fa.area <= fb.area else ((b, fb), (a, fa))
+                if small_fp.area < 0.5 * big_fp.area and not small.partial_only:
                     if strip_points(big, strong_points(small), cfg, known_free):
                         continue
                     drop = big
@@ -215,9 +219,9 @@ def resolve_track_collisions(
                     drop = b if a.near_range < b.near_range else a
                 else:
                     # more evidence wins; on a tie the incumbent (older) object stays
-                    ka = (a.presence, a.frames, a.detections, -a.created)
-                    kb = (b.presence, b.frames, b.detections, -b.created)
-                    drop = b if ka >= kb else a
+                    ea = (a.presence, a.frames, a.detections, -a.created)
+                    eb = (b.presence, b.frames, b.detections, -b.created)
+                    drop = b if ea >= eb else a
                 removed.add(drop.id)
                 rep.removed += 1
                 if drop is a:

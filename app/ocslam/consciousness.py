@@ -315,7 +315,7 @@ class Consciousness:
 
         # scan: valid points (for islands) and every beam (for free-space / occlusion tests)
         ranges = np.asarray(scan.ranges, dtype=np.float64).reshape(-1)
-        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges))
+        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges), dtype=np.float64)
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(ranges) & (ranges >= scan.range_min) & (ranges <= scan.range_max)
             no_return = np.isposinf(ranges) | (np.isfinite(ranges) & (ranges > scan.range_max))

@@ -140,7 +140,7 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
 
 def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
     """argmin ``½ sᵀHs − gᵀs`` over the box ``lo ≤ s ≤ hi`` (2D, H positive definite)."""
-    s = np.linalg.solve(H, g)
+    s = np.asarray(np.linalg.solve(H, g), dtype=np.float64)
     if np.all(s >= lo - 1e-12) and np.all(s <= hi + 1e-12):
         return s
 
@@ -463,7 +463,7 @@ def estimate_footprint(
             w = ev.ray_weight[use]
             H = H + (n * w[:, None]).T @ n
             g = g + (n * (w * np.sum(n * ev.ray_origin[use], axis=1))[:, None]).sum(axis=0)
-        return Footprint(np.linalg.solve(H, g), yaw, a, b)
+        return Footprint(np.asarray(np.linalg.solve(H, g), dtype=np.float64), yaw, a, b)
 
     # stray points that once joined the object (a background point between a pedestal table's legs) do
     # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every

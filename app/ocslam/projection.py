@@ -105,7 +105,7 @@ class CameraModel:
 
     @cached_property
     def K_inv(self) -> FloatArray:
-        return np.linalg.inv(self.K)
+        return np.asarray(np.linalg.inv(self.K), dtype=np.float64)
 
     @property
     def R_base_optical(self) -> FloatArray:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from typing import TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -318,6 +319,18 @@ def snap_goal(
     d = np.where(ok, d, np.inf)
     i = int(np.argmin(d))
     return int(rr.ravel()[i]), int(cc.ravel()[i])
+
+
+class PlanOptions(TypedDict, total=False):
+    """The tuning keywords of :func:`plan_path` (what a :class:`~app.ocslam.navigation.goto.GoToController`
+    passes through)."""
+
+    goal_snap_radius_m: float
+    inflation_padding_m: float
+    clearance_m: float
+    clearance_weight: float
+    occupied_threshold: int
+    smooth: bool
 
 
 def plan_path(

@@ -109,7 +109,7 @@ class FrontierExplorer:
         g = self.goal_xy if goal_xy is None else np.asarray(goal_xy, dtype=np.float64).reshape(2)
         if g is not None and np.isfinite(g).all():
             self.blacklist.append(np.array(g, dtype=np.float64))
-        if goal_xy is None or (self.goal_xy is not None and np.allclose(g, self.goal_xy)):
+        if goal_xy is None or (g is not None and self.goal_xy is not None and np.allclose(g, self.goal_xy)):
             self.goal_xy = None
             self.path = None
             self.goal_frontier = None
@@ -168,7 +168,8 @@ class FrontierExplorer:
         if n == 0:
             self.last_reason = "no frontier"
             self._note_abandoned(self.goal_xy)
-            return self._clear()
+            self._clear()
+            return None
         start = (int(s_cell[0]), int(s_cell[1]))
         dist, pred = cost_to_go(cm, start)
         res = cm.resolution
@@ -212,7 +213,8 @@ class FrontierExplorer:
         if rows.size == 0 and keep is None:
             self.last_reason = "no reachable frontier"
             self._note_abandoned(prev)
-            return self._clear()
+            self._clear()
+            return None
         if rows.size:
             lab = near_label[rows, cols]
             path_cost = dist[rows, cols] * res
@@ -221,7 +223,7 @@ class FrontierExplorer:
             order = np.lexsort((path_cost, lab))
             first = order[np.unique(lab[order], return_index=True)[1]]
             best = int(first[np.argmin(score[first])])
-        if keep is not None and (rows.size == 0 or score[best] >= keep[1] - self.switch_margin_m):
+        if keep is not None and prev is not None and (rows.size == 0 or score[best] >= keep[1] - self.switch_margin_m):
             goal_cell, goal_label = keep[0], keep[2]
             goal_xy = prev.copy()
         else:
@@ -255,7 +257,7 @@ class FrontierExplorer:
         t = np.linspace(0.0, 1.0, n)[None, :]
         rr = np.rint(rows[:, None] + t * (fr - rows)[:, None]).astype(np.int64)
         cc = np.rint(cols[:, None] + t * (fc - cols)[:, None]).astype(np.int64)
-        return ~cm.occupied[rr, cc].any(axis=1)
+        return np.asarray(~cm.occupied[rr, cc].any(axis=1), dtype=np.bool_)
 
     def _note_abandoned(self, goal: NDArray[np.float64] | None) -> None:
         """Count a goal given up for another one; a place abandoned ``max_abandons`` times (its frontier

@@ -12,14 +12,19 @@ driven but does not move gets a virtual obstacle ahead of it (:class:`StuckDetec
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from app.ocslam.config import RobotConfig
 from app.ocslam.messages import LaserScan, OccupancyGrid, Twist
-from app.ocslam.navigation.astar import plan_path
+from app.ocslam.navigation.astar import PlanOptions, plan_path
 from app.ocslam.navigation.follower import ARRIVED, BLOCKED, PathFollower, StuckDetector
 from app.ocslam.se2 import Pose2
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # typing.Unpack from Python 3.11
 
 
 class GoToController:
@@ -36,7 +41,7 @@ class GoToController:
         max_blocked_replans: int = 5,
         max_plan_failures: int = 3,
         unknown_is_obstacle: bool = False,
-        **plan_kwargs: float,
+        **plan_kwargs: Unpack[PlanOptions],
     ) -> None:
         goal = np.asarray(goal_xy, dtype=np.float64).reshape(2)
         if not np.isfinite(goal).all():

@@ -236,7 +236,7 @@ def camera_render_size(cfg: Config) -> tuple[int, int]:
 def build_camera_model(cfg: Config, robot_model: Any):
     """The camera model of the consciousness: K from the FOV at the rendered size, extrinsics from the URDF."""
     from app.ocslam.messages import CameraInfo
-    from app.ocslam.projection import CameraModel
+    from app.ocslam.camera import CameraModel
 
     w, h = camera_render_size(cfg)
     return CameraModel(

@@ -7,15 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.ocslam.camera import CameraModel, ground_plane_point, transform_matrix
 from app.ocslam.messages import CLASS_INDEX, CameraInfo, Detection, Detections
-from app.ocslam.projection import (
+from app.ocslam.projection import area_from_box, assign_points, bounding_areas, camera_bound
+from app.ocslam.seed_projection import (
     SEED_FY,
-    CameraModel,
-    area_from_box,
-    assign_points,
-    bounding_areas,
-    camera_bound,
-    ground_plane_point,
     seed_assign_points,
     seed_bounding_areas,
     seed_camera_angles,
@@ -23,7 +19,6 @@ from app.ocslam.projection import (
     seed_project_points,
     seed_projection,
     seed_scan_points,
-    transform_matrix,
 )
 
 INFO = CameraInfo.from_fov(640, 480, 1.04)

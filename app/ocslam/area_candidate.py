@@ -14,13 +14,14 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.footprint import Footprint, ObjectEvidence, estimate_footprint, min_area_rect
 from app.ocslam.islands import Island, islands_linkage
 from app.ocslam.messages import OccupancyGrid
-from app.ocslam.projection import BoundingArea, CameraModel
+from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import angle_wrap
 

@@ -46,6 +46,7 @@ from shapely.geometry import Polygon
 
 from app.ocslam.area_candidate import area_candidate
 from app.ocslam.association import associate, bearing_match, sighting
+from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
@@ -53,9 +54,10 @@ from app.ocslam.footprint import NO_KEYFRAME, Footprint
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
-from app.ocslam.projection import CameraModel, assign_points, bounding_areas, camera_bound, seed_camera_projection
+from app.ocslam.projection import assign_points, bounding_areas, camera_bound
 from app.ocslam.se2 import Pose2
 from app.ocslam.seed import SeedConsciousness
+from app.ocslam.seed_projection import seed_camera_projection
 from app.ocslam.track_state import tracks_from_state, tracks_state
 from app.ocslam.tracks import Sighting, Track, angle_wrap, create_track, credit_track, export_track, grid_free_fn, update_track
 

@@ -12,10 +12,11 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import FrameReport
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.presence import decay_presence, in_camera_view, occluded_by_scan
-from app.ocslam.projection import BoundingArea, CameraModel
+from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track
 

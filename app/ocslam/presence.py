@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from app.ocslam.camera import CameraModel
 from app.ocslam.footprint import Footprint
-from app.ocslam.projection import CameraModel
 from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]

@@ -1,243 +1,32 @@
 """Detection boxes projected onto the LIDAR plane ("bounding areas", paper §2.5.2).
 
-Improved geometry (default): the camera model ``P = K [R | t]`` with the camera's pose on the robot
-(``T_base_optical``, from the URDF) and the LIDAR's (``T_base_scan``). Every image column ``u`` is a
-plane through the camera centre; it cuts the LIDAR plane in a half-line from the *apex* (where the
-camera's vertical axis meets the LIDAR plane). A box ``(x1, y1, x2, y2)`` becomes the wedge between
-the half-lines of its left and right edges, starting at the *near range* where the ray through its
-bottom edge meets the floor (``z = 0``), and ending at ``max_range_m``. The *bisector* is the half-line
-of the box's centre column. All areas are shapely polygons in the ``base_scan`` frame (2D, metres).
+Improved geometry (default), on the half-lines of the image columns (:class:`~app.ocslam.camera.CameraModel`):
+a box ``(x1, y1, x2, y2)`` becomes the wedge between the half-lines of its left and right edges,
+starting at the *near range* where the ray through its bottom edge meets the floor (``z = 0``), and
+ending at ``max_range_m``. The *bisector* is the half-line of the box's centre column. All areas are
+shapely polygons in the ``base_scan`` frame (2D, metres). :func:`assign_points` gives each LIDAR point
+to the area that explains it best.
 
-Seed-faithful geometry (:func:`seed_bounding_areas`): the original implementation's formulas
-(spec §1.2–1.4): camera 4 cm above the LIDAR at its origin, calibrated K, the 672×505.05 image with
-flipped rows, the right edge widened by 1.05, ranges clamped at 22.64 m, strict containment, and a
-point may belong to several areas.
-
-Frames: ``base`` is ``base_footprint`` (z = 0 on the floor, x forward, y left, z up); the optical
-frame is z forward, x right, y down; ``base_scan`` is the LIDAR frame (assumed level).
+The original implementation's formulas (seed mode) are in :mod:`app.ocslam.seed_projection`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
-from typing import Sequence
 
 import numpy as np
 import shapely
 from numpy.typing import NDArray
 from shapely.geometry import Polygon
 
-from app.ocslam.messages import CameraInfo, Detection, Detections
-from app.ocslam.se2 import Pose2
+from app.ocslam.camera import CameraModel
+from app.ocslam.messages import Detection, Detections
 
 FloatArray = NDArray[np.float64]
 
-#: Rotation from a REP-103 camera link (x forward, y left, z up) to its optical frame (z fwd, x right, y down).
-R_LINK_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
 #: Points of a wedge's far arc.
 _ARC_SEGMENTS = 12
-
-
-def _rpy_matrix(roll: float, pitch: float, yaw: float) -> FloatArray:
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1.0]])
-    ry = np.array([[cp, 0, sp], [0, 1.0, 0], [-sp, 0, cp]])
-    rx = np.array([[1.0, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    return rz @ ry @ rx
-
-
-def transform_matrix(xyz: Sequence[float], rpy: Sequence[float] = (0.0, 0.0, 0.0)) -> FloatArray:
-    """(4, 4) homogeneous transform from a URDF-style ``xyz`` / ``rpy`` (fixed axes X, Y, Z)."""
-    T = np.eye(4)
-    T[:3, :3] = _rpy_matrix(*rpy)
-    T[:3, 3] = np.asarray(xyz, dtype=np.float64)
-    return T
-
-
-# ----------------------------------------------------------------------------------------------
-# Camera model
-# ----------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class CameraModel:
-    """Pinhole camera on the robot, plus the LIDAR's pose.
-
-    ``T_base_optical``: (4, 4) pose of the optical frame in ``base_footprint``.
-    ``T_base_scan``: (4, 4) pose of the LIDAR frame in ``base_footprint`` (level; its height is the
-    LIDAR plane).
-    """
-
-    info: CameraInfo
-    T_base_optical: FloatArray
-    T_base_scan: FloatArray
-
-    def __post_init__(self) -> None:
-        for name in ("T_base_optical", "T_base_scan"):
-            m = np.asarray(getattr(self, name), dtype=np.float64)
-            if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-                raise ValueError(f"CameraModel.{name} must be a finite (4, 4) matrix")
-            object.__setattr__(self, name, m)
-        K = np.asarray(self.info.K, dtype=np.float64)
-        if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError("CameraModel: K must be a finite (3, 3) matrix with positive focal lengths")
-
-    @staticmethod
-    def from_mount(
-        info: CameraInfo,
-        camera_xyz: Sequence[float] = (0.0, 0.0, 0.19),
-        camera_rpy: Sequence[float] = (0.0, 0.0, 0.0),
-        scan_xyz: Sequence[float] = (-0.032, 0.0, 0.173),
-        scan_yaw: float = 0.0,
-    ) -> "CameraModel":
-        """Build from the camera *link* pose (REP-103 axes) and the LIDAR position in ``base_footprint``."""
-        T_base_link = transform_matrix(camera_xyz, camera_rpy)
-        T_link_optical = np.eye(4)
-        T_link_optical[:3, :3] = R_LINK_OPTICAL
-        return CameraModel(info, T_base_link @ T_link_optical, transform_matrix(scan_xyz, (0.0, 0.0, scan_yaw)))
-
-    # -- basic quantities ---------------------------------------------------------------------------
-    @property
-    def K(self) -> FloatArray:
-        return np.asarray(self.info.K, dtype=np.float64)
-
-    @cached_property
-    def K_inv(self) -> FloatArray:
-        return np.asarray(np.linalg.inv(self.K), dtype=np.float64)
-
-    @property
-    def R_base_optical(self) -> FloatArray:
-        return self.T_base_optical[:3, :3]
-
-    @property
-    def center_base(self) -> FloatArray:
-        """(3,) camera centre in ``base_footprint``."""
-        return self.T_base_optical[:3, 3]
-
-    @property
-    def lidar_height(self) -> float:
-        """Height of the LIDAR plane above the floor (m)."""
-        return float(self.T_base_scan[2, 3])
-
-    @property
-    def camera_height(self) -> float:
-        return float(self.T_base_optical[2, 3])
-
-    @cached_property
-    def T_base_scan_2d(self) -> Pose2:
-        """The LIDAR frame's planar pose in ``base_footprint``."""
-        R = self.T_base_scan[:3, :3]
-        return Pose2(float(self.T_base_scan[0, 3]), float(self.T_base_scan[1, 3]), float(np.arctan2(R[1, 0], R[0, 0])))
-
-    @cached_property
-    def P(self) -> FloatArray:
-        """(3, 4) projection matrix ``K [R | t]`` mapping homogeneous ``base_footprint`` points to pixels."""
-        T_optical_base = np.linalg.inv(self.T_base_optical)
-        return self.K @ T_optical_base[:3, :]
-
-    def project(self, points_base: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """``(N, 3)`` base points → ``(N, 2)`` pixels ``(u, v)`` and ``(N,)`` optical depths (≤ 0: behind)."""
-        p = np.asarray(points_base, dtype=np.float64).reshape(-1, 3)
-        h = np.hstack([p, np.ones((len(p), 1))]) @ self.P.T
-        z = h[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = h[:, :2] / z[:, None]
-        return uv, z
-
-    def pixel_rays(self, uv: FloatArray) -> FloatArray:
-        """``(N, 2)`` pixels → ``(N, 3)`` unit ray directions in ``base_footprint``."""
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        d = np.hstack([uv, np.ones((len(uv), 1))]) @ self.K_inv.T @ self.R_base_optical.T
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
-
-    def rays_to_plane(self, uv: FloatArray, z: float) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """Intersect the rays of ``(N, 2)`` pixels with the horizontal plane at height ``z`` (base frame).
-
-        Returns ``(N, 3)`` points and an ``(N,)`` mask of rays that hit the plane in front of the camera.
-        """
-        d = self.pixel_rays(uv)
-        c = self.center_base
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (z - c[2]) / d[:, 2]
-        ok = np.isfinite(s) & (s > 0.0)
-        s = np.where(ok, s, np.nan)
-        return c[None, :] + s[:, None] * d, ok
-
-    # -- the LIDAR plane ---------------------------------------------------------------------------
-    @cached_property
-    def apex_base(self) -> FloatArray:
-        """(2,) where every image column's half-line starts on the LIDAR plane (base frame, x/y)."""
-        c = self.center_base
-        y_opt = self.R_base_optical[:, 1]
-        if abs(y_opt[2]) < 1e-6:
-            return c[:2].copy()
-        s = (self.lidar_height - c[2]) / y_opt[2]
-        return (c + s * y_opt)[:2]
-
-    @cached_property
-    def apex_scan(self) -> FloatArray:
-        """(2,) the apex in ``base_scan``."""
-        return self.T_base_scan_2d.inverse().transform_points(self.apex_base[None, :])[0]
-
-    def column_directions_base(self, u: FloatArray) -> FloatArray:
-        """``(N,)`` image columns → ``(N, 2)`` unit directions of their half-lines on the LIDAR plane (base)."""
-        u = np.asarray(u, dtype=np.float64).reshape(-1)
-        cy = self.info.cy
-        d = self.pixel_rays(np.stack([u, np.full_like(u, cy)], axis=1))
-        y = self.R_base_optical[:, 1]
-        # n = y × d, then the line direction n × e_z = (n_y, −n_x)
-        nx = y[1] * d[:, 2] - y[2] * d[:, 1]
-        ny = y[2] * d[:, 0] - y[0] * d[:, 2]
-        line = np.stack([ny, -nx], axis=1)
-        norm = np.linalg.norm(line, axis=1, keepdims=True)
-        fallback = d[:, :2] / np.maximum(np.linalg.norm(d[:, :2], axis=1, keepdims=True), 1e-12)
-        line = np.where(norm > 1e-9, line / np.maximum(norm, 1e-12), fallback)
-        sign = np.sign(np.sum(line * d[:, :2], axis=1))
-        sign[sign == 0] = 1.0
-        return line * sign[:, None]
-
-    def column_directions_scan(self, u: FloatArray) -> FloatArray:
-        """``(N,)`` columns → ``(N, 2)`` unit half-line directions in ``base_scan``."""
-        d = self.column_directions_base(u)
-        c, s = np.cos(-self.T_base_scan_2d.yaw), np.sin(-self.T_base_scan_2d.yaw)
-        return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
-
-    def column_bearings_scan(self, u: FloatArray) -> FloatArray:
-        """``(N,)`` columns → ``(N,)`` bearings (rad) of their half-lines about the apex, in ``base_scan``."""
-        d = self.column_directions_scan(u)
-        return np.arctan2(d[:, 1], d[:, 0])
-
-    def ground_ranges(self, uv: FloatArray) -> FloatArray:
-        """``(N, 2)`` pixels → ``(N,)`` horizontal distance from the apex to where the ray meets the floor.
-
-        ``inf`` for rays at or above the horizon.
-        """
-        p, ok = self.rays_to_plane(uv, 0.0)
-        r = np.linalg.norm(p[:, :2] - self.apex_base[None, :], axis=1)
-        return np.where(ok, r, np.inf)
-
-    def bearing_ranges_scan(self, points_scan: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """``(N, 2)`` points in ``base_scan`` → ``(N,)`` bearings and ``(N,)`` ranges about the apex."""
-        d = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2) - self.apex_scan[None, :]
-        return np.arctan2(d[:, 1], d[:, 0]), np.hypot(d[:, 0], d[:, 1])
-
-
-def ground_plane_point(u: float, v: float, camera: CameraModel) -> tuple[float, float] | None:
-    """Where the ray through pixel ``(u, v)`` meets the floor ``z = 0``: ``(x, y)`` in ``base_footprint``.
-
-    ``None`` if the ray points at or above the horizon.
-    """
-    p, ok = camera.rays_to_plane(np.array([[u, v]], dtype=np.float64), 0.0)
-    if not ok[0]:
-        return None
-    return float(p[0, 0]), float(p[0, 1])
-
-
-# ----------------------------------------------------------------------------------------------
-# Bounding areas (improved geometry)
-# ----------------------------------------------------------------------------------------------
 
 
 @dataclass(eq=False)
@@ -334,14 +123,15 @@ def _wedge_polygon(apex: FloatArray, b_left: float, b_right: float, r_near: floa
     return poly
 
 
-def _box_scale(detections: Detections, width: float, height: float) -> tuple[float, float]:
+def box_scale(detections: Detections, width: float, height: float) -> tuple[float, float]:
     """``(sx, sy)`` from the detections' image size to ``width × height`` (1, 1 if the size is unknown)."""
     if detections.image_width > 0 and detections.image_height > 0:
         return width / detections.image_width, height / detections.image_height
     return 1.0, 1.0
 
 
-def _scale_box(det: Detection, sx: float, sy: float) -> Detection:
+def scale_box(det: Detection, sx: float, sy: float) -> Detection:
+    """``det`` with its corners scaled by ``(sx, sy)`` (the same object when both are 1)."""
     if sx == 1.0 and sy == 1.0:
         return det
     return Detection(det.x1 * sx, det.y1 * sy, det.x2 * sx, det.y2 * sy, det.class_id, det.confidence)
@@ -421,12 +211,12 @@ def bounding_areas(
     sx = sy = 1.0
     if isinstance(detections, Detections):
         boxes = detections.boxes
-        sx, sy = _box_scale(detections, camera.info.width, camera.info.height)
+        sx, sy = box_scale(detections, camera.info.width, camera.info.height)
     else:
         boxes = detections
     out = []
     for det in boxes:
-        a = area_from_box(_scale_box(det, sx, sy), camera, max_range_m, bottom_margin_px, edge_margin_px, near_tolerance)
+        a = area_from_box(scale_box(det, sx, sy), camera, max_range_m, bottom_margin_px, edge_margin_px, near_tolerance)
         if a is not None:
             a.detection = det
             out.append(a)
@@ -498,114 +288,3 @@ def assign_points(
     inside[rows] = False
     inside[rows, best] = True
     return inside
-
-
-# ----------------------------------------------------------------------------------------------
-# Seed-faithful projection (spec §1.2–1.4)
-# ----------------------------------------------------------------------------------------------
-
-SEED_CAM_HEIGHT = 0.20
-SEED_LIDAR_HEIGHT = 0.16
-SEED_H = SEED_CAM_HEIGHT - SEED_LIDAR_HEIGHT  # 0.04 m
-SEED_IMAGE_WIDTH = 640 * 1.05  # 672
-SEED_IMAGE_HEIGHT = 481 * 1.05  # 505.05
-SEED_FX, SEED_FY, SEED_CX, SEED_CY = 565.1448, 566.1120, 322.4309, 255.4085
-SEED_WIDEN = 1.05
-
-
-def seed_project_points(xy: FloatArray) -> FloatArray:
-    """The original ``project_point`` on ``(N, 2)`` pixel coordinates → ``(N, 2)`` LIDAR-plane points.
-
-    ``u = (x − cx)/fx``, ``v = (min(y, cy − 1) − cy)/fy``, ``X = h/(−v)``, ``Y = −u·X``
-    (``X ≤ h·fy = 22.64 m``).
-    """
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    u = (xy[:, 0] - SEED_CX) / SEED_FX
-    v = (np.minimum(xy[:, 1], SEED_CY - 1.0) - SEED_CY) / SEED_FY
-    X = SEED_H / (-v)
-    return np.stack([X, -u * X], axis=1)
-
-
-@dataclass(eq=False)
-class SeedProjection:
-    """The original's projection of one box: the quadrilateral and its centre line (robot = LIDAR frame)."""
-
-    detection: Detection | None
-    vertices: FloatArray  # (4, 2) near-left, near-right, far-right, far-left
-    polygon: Polygon
-    points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # (K, 2) LIDAR points it received
-
-    @property
-    def near_midpoint(self) -> FloatArray:
-        return 0.5 * (self.vertices[0] + self.vertices[1])
-
-    @property
-    def far_midpoint(self) -> FloatArray:
-        return 0.5 * (self.vertices[2] + self.vertices[3])
-
-    def bisector_distance(self, points: FloatArray) -> FloatArray:
-        a, b = self.near_midpoint, self.far_midpoint
-        d = b - a
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 2) - a
-        return np.abs(p[:, 0] * d[1] - p[:, 1] * d[0]) / max(float(np.linalg.norm(d)), 1e-12)
-
-
-def seed_projection(x1: float, y1: float, x2: float, y2: float, det: Detection | None = None) -> SeedProjection:
-    """Project one box as the original did: rows flipped (``y' = 505.05 − y``), ``x2' = 1.05·x2``."""
-    y1f, y2f = SEED_IMAGE_HEIGHT - y1, SEED_IMAGE_HEIGHT - y2
-    x2w = SEED_WIDEN * x2
-    corners = np.array([[x1, y2f], [x2w, y2f], [x2w, y1f], [x1, y1f]])
-    verts = seed_project_points(corners)
-    return SeedProjection(det, verts, Polygon(verts))
-
-
-def seed_camera_projection() -> SeedProjection:
-    """The original's camera bound: the unflipped image corners (0,0), (672,0), (672,505.05), (0,505.05)."""
-    corners = np.array([[0.0, 0.0], [SEED_IMAGE_WIDTH, 0.0], [SEED_IMAGE_WIDTH, SEED_IMAGE_HEIGHT], [0.0, SEED_IMAGE_HEIGHT]])
-    verts = seed_project_points(corners)
-    return SeedProjection(None, verts, Polygon(verts))
-
-
-def seed_camera_angles() -> tuple[float, float]:
-    """``(cam_angle_min, cam_angle_max)`` ≈ (−0.5539, +0.5185) rad."""
-    v = seed_camera_projection().vertices
-    a = np.arctan2(v[:, 1], v[:, 0])
-    return float(a.min()), float(a.max())
-
-
-SEED_CAMERA_SIZE = (640, 480)  # the original camera's image, the pixels its constants are in
-
-
-def seed_bounding_areas(detections: Detections) -> list[SeedProjection]:
-    """The original's areas, from the integer ``/yolo_boxes`` matrix (one per box, in order).
-
-    The original's constants are in the 640×480 camera image's pixels, so boxes of an image rendered at
-    another size (the app renders 320×240 by default) are first scaled to 640×480, as the original's
-    YOLO node would have reported them.
-    """
-    out = []
-    sx, sy = _box_scale(detections, *SEED_CAMERA_SIZE)
-    seen = Detections(detections.stamp, *SEED_CAMERA_SIZE, tuple(_scale_box(b, sx, sy) for b in detections.boxes))
-    for det, row in zip(detections.boxes, seen.yolo_boxes()):
-        x1, y1, x2, y2 = (float(v) for v in row[:4])
-        out.append(seed_projection(x1, y1, x2, y2, det))
-    return out
-
-
-def seed_assign_points(points: FloatArray, projections: Sequence[SeedProjection]) -> NDArray[np.bool_]:
-    """``(N, 2)`` points → ``(N, A)``: strict containment, a point may be in several areas."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    out = np.zeros((len(pts), len(projections)), dtype=bool)
-    for k, p in enumerate(projections):
-        if len(pts):
-            out[:, k] = shapely.contains_xy(p.polygon, pts[:, 0], pts[:, 1])
-    return out
-
-
-def seed_scan_points(ranges: FloatArray, angle_min: float, angle_increment: float) -> FloatArray:
-    """The original's LIDAR points: every non-inf range inside the camera's strict angle limits → ``(M, 2)``."""
-    r = np.asarray(ranges, dtype=np.float64)
-    theta = angle_min + angle_increment * np.arange(len(r))
-    a_min, a_max = seed_camera_angles()
-    keep = ~np.isinf(r) & ~np.isnan(r) & (theta > a_min) & (theta < a_max)
-    return np.stack([r[keep] * np.cos(theta[keep]), r[keep] * np.sin(theta[keep])], axis=1)

@@ -21,14 +21,14 @@ from numpy.typing import NDArray
 
 from app.ocslam.islands import Island, islands_seed
 from app.ocslam.messages import Detections, LaserScan, TrackedObject
-from app.ocslam.projection import (
+from app.ocslam.se2 import Pose2
+from app.ocslam.seed_projection import (
     SeedProjection,
     seed_assign_points,
     seed_bounding_areas,
     seed_camera_projection,
     seed_scan_points,
 )
-from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]
 

@@ -95,7 +95,7 @@ class ReplayCore:
 
     def __init__(self, cfg: Config, bag: Bag, *, reuse_detections: bool = False, detector: Any = "auto") -> None:
         from app.ocslam.consciousness import Consciousness
-        from app.ocslam.projection import CameraModel
+        from app.ocslam.camera import CameraModel
         from app.ocslam.slam import Slam
         from app.sim.robot_model import RobotModel
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from app.ocslam.classes import prior
-from app.ocslam.footprint import ObjectEvidence, estimate_footprint
+from app.ocslam.evidence import ObjectEvidence
+from app.ocslam.footprint import estimate_footprint
 
 
 def _face(x: float, y0: float, y1: float, n: int = 30) -> np.ndarray:

@@ -18,7 +18,8 @@ from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.footprint import Footprint, ObjectEvidence, estimate_footprint, min_area_rect
+from app.ocslam.evidence import ObjectEvidence
+from app.ocslam.footprint import Footprint, estimate_footprint, min_area_rect
 from app.ocslam.islands import Island, islands_linkage
 from app.ocslam.messages import OccupancyGrid
 from app.ocslam.projection import BoundingArea

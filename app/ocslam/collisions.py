@@ -14,7 +14,8 @@ from scipy.spatial import cKDTree
 from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.footprint import ObjectEvidence, estimate_footprint, min_area_rect
+from app.ocslam.evidence import ObjectEvidence
+from app.ocslam.footprint import estimate_footprint, min_area_rect
 from app.ocslam.projection import BoundingArea
 from app.ocslam.tracks import FreeFn, Track, along_ray_close, co_observed, contiguous, merge_tracks, overlap_fraction
 

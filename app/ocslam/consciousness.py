@@ -50,7 +50,8 @@ from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.footprint import NO_KEYFRAME, Footprint
+from app.ocslam.evidence import NO_KEYFRAME
+from app.ocslam.footprint import Footprint
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject

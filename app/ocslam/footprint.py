@@ -1,18 +1,9 @@
-"""An object's accumulated evidence and the footprint estimated from it (improved mode).
+"""An object's footprint, estimated from its accumulated evidence (improved mode).
 
-Every observation of an object adds:
-
-- its island points (voxel-downsampled; ``hits`` counts how often a voxel was seen),
-- the *bisector ray* of its box (apex and direction on the floor plane): the object's centre lies near
-  it (the paper's assumption 2); rays of boxes cut by the image border only count as viewpoints,
-- for objects the LIDAR cannot see, a ground-plane centre (rolling average, the paper's 90 % weight).
-
-All of it is stored in the object frame (``map``) tagged with the SLAM keyframe it was seen from, so a
-loop-closure correction moves every piece rigidly with its keyframe (:meth:`ObjectEvidence.transform`).
-
-The footprint (:func:`estimate_footprint`) is the minimum-area rectangle of the points, completed to
-the class's size on the sides the robot never saw (a sofa seen from the front is as deep as a sofa),
-positioned where the bisector rays cross (least squares) inside the range the points allow.
+The footprint (:func:`estimate_footprint`) is the minimum-area rectangle of the points of an
+:class:`~app.ocslam.evidence.ObjectEvidence`, completed to the class's size on the sides the robot
+never saw (a sofa seen from the front is as deep as a sofa), positioned where the bisector rays cross
+(least squares) inside the range the points allow. All in the object frame (``map``).
 """
 
 from __future__ import annotations
@@ -29,10 +20,10 @@ from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
 from app.ocslam.classes import ClassPrior
+from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]
-NO_KEYFRAME = -1
 #: A voxel seen rarely and farther than this from every well-seen voxel is a stray (m).
 _STRAY_M = 0.3
 
@@ -157,209 +148,6 @@ def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> Flo
             x[i], x[j] = v, np.clip(sj, lo[j], hi[j])
             cands.append(x)
     return min(cands, key=f)
-
-
-class ObjectEvidence:
-    """What one tracked object has accumulated: points, bisector rays and ground-plane centres.
-
-    Arrays are in the object frame (``map``); each entry carries the keyframe it was seen from.
-    """
-
-    def __init__(self, voxel_m: float = 0.03, max_points: int = 800, max_rays: int = 48) -> None:
-        self.voxel_m = voxel_m
-        self.max_points = max_points
-        self.max_rays = max_rays
-        self.points = np.zeros((0, 2))
-        self.hits = np.zeros(0, dtype=np.int64)
-        self.point_kf = np.zeros(0, dtype=np.int64)
-        self.ray_origin = np.zeros((0, 2))
-        self.ray_dir = np.zeros((0, 2))
-        self.ray_weight = np.zeros(0)
-        self.ray_kf = np.zeros(0, dtype=np.int64)
-        self.ray_app = np.zeros(0)  # apparent width seen along each ray (m), NaN if unknown
-        self.ray_open = np.zeros(0, dtype=np.int64)  # +1/-1: box cut by the image's left/right border
-        self.gp_center: FloatArray | None = None
-        self.gp_kf: int = NO_KEYFRAME
-        #: legged classes: observations as one small island on the box's centre line vs. off it / several legs
-        self.support_obs = 0
-        self.corner_obs = 0
-        #: observations with points, and those whose points were all leg-sized islands (legged classes)
-        self.observations = 0
-        self.leg_obs = 0
-
-    # -- accumulation ----------------------------------------------------------------------------
-    @property
-    def has_points(self) -> bool:
-        return len(self.points) > 0
-
-    def add_points(self, points: FloatArray, kf: int = NO_KEYFRAME) -> None:
-        """Add ``(N, 2)`` points (object frame), merging them into voxels of ``voxel_m``."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        p = p[np.all(np.isfinite(p), axis=1)]
-        if len(p) == 0:
-            return
-        # existing voxel means carry their hit counts as weights
-        w = np.concatenate([self.hits, np.ones(len(p), dtype=np.int64)]).astype(np.float64)
-        pos = np.vstack([self.points, p]) if len(self.points) else p
-        kfs = np.concatenate([self.point_kf, np.full(len(p), kf, dtype=np.int64)])
-        keys = np.floor(pos / self.voxel_m).astype(np.int64)
-        key1 = (keys[:, 0] + (1 << 31)) * (1 << 32) + (keys[:, 1] + (1 << 31))
-        _, inv = np.unique(key1, return_inverse=True)
-        inv = inv.reshape(-1)
-        n = int(inv.max()) + 1
-        wsum = np.bincount(inv, weights=w, minlength=n)
-        sx = np.bincount(inv, weights=pos[:, 0] * w, minlength=n)
-        sy = np.bincount(inv, weights=pos[:, 1] * w, minlength=n)
-        kf_out = np.full(n, NO_KEYFRAME, dtype=np.int64)
-        np.maximum.at(kf_out, inv, kfs)
-        self.points = np.stack([sx / wsum, sy / wsum], axis=1)
-        self.hits = np.rint(wsum).astype(np.int64)
-        self.point_kf = kf_out
-        if len(self.points) > self.max_points:
-            keep = np.argsort(-self.hits, kind="stable")[: self.max_points]
-            keep.sort()
-            self.points, self.hits, self.point_kf = self.points[keep], self.hits[keep], self.point_kf[keep]
-
-    def add_ray(
-        self,
-        origin: FloatArray,
-        direction: FloatArray,
-        weight: float,
-        kf: int = NO_KEYFRAME,
-        decay: float = 1.0,
-        apparent_width: float = float("nan"),
-        open_side: int = 0,
-    ) -> None:
-        """Add a bisector ray (object frame); older rays' weights are multiplied by ``decay`` first.
-
-        ``apparent_width``: the object's width across the ray as the box shows it (m), NaN if unknown.
-        ``open_side``: +1 if the box was cut by the image's left border (the ray is then that border's
-        half-line and the object continues to its left), −1 for the right border, 0 otherwise.
-        """
-        d = np.asarray(direction, dtype=np.float64)
-        n = float(np.linalg.norm(d))
-        o = np.asarray(origin, dtype=np.float64)
-        if n < 1e-12 or not np.all(np.isfinite(o)) or not np.isfinite(n):
-            return
-        d = d / n
-        self.ray_weight = self.ray_weight * decay
-        self.ray_origin = np.vstack([self.ray_origin, o[None, :]])
-        self.ray_dir = np.vstack([self.ray_dir, d[None, :]])
-        self.ray_weight = np.append(self.ray_weight, float(weight))
-        self.ray_kf = np.append(self.ray_kf, int(kf))
-        self.ray_app = np.append(self.ray_app, float(apparent_width))
-        self.ray_open = np.append(self.ray_open, int(open_side))
-        if len(self.ray_weight) > self.max_rays:
-            # keep the viewpoints spread out: drop the older ray of the closest pair of origins
-            o_all = self.ray_origin
-            d2 = np.sum((o_all[:, None, :] - o_all[None, :, :]) ** 2, axis=-1)
-            d2[np.tril_indices(len(o_all))] = np.inf
-            i, _j = np.unravel_index(np.argmin(d2), d2.shape)
-            keep = np.ones(len(o_all), dtype=bool)
-            keep[i] = False
-            self.ray_origin, self.ray_dir = self.ray_origin[keep], self.ray_dir[keep]
-            self.ray_weight, self.ray_kf, self.ray_app = self.ray_weight[keep], self.ray_kf[keep], self.ray_app[keep]
-            self.ray_open = self.ray_open[keep]
-
-    def add_ground_center(self, center: FloatArray, weight_old: float, kf: int = NO_KEYFRAME) -> None:
-        """Rolling average of ground-plane centres: ``c ← w·c + (1 − w)·new`` (paper's 90 %)."""
-        c = np.asarray(center, dtype=np.float64).reshape(2)
-        if not np.all(np.isfinite(c)):
-            return
-        self.gp_center = c.copy() if self.gp_center is None else weight_old * self.gp_center + (1.0 - weight_old) * c
-        self.gp_kf = int(kf)
-
-    def absorb(self, other: "ObjectEvidence") -> None:
-        """Merge another object's evidence into this one (same class, same object)."""
-        if other.has_points:
-            for k in np.unique(other.point_kf):
-                m = other.point_kf == k
-                # repeat points by hits to keep their weight
-                self.add_points(np.repeat(other.points[m], other.hits[m], axis=0), int(k))
-        for o, d, w, k, a, op in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app, other.ray_open):
-            self.add_ray(o, d, float(w), int(k), apparent_width=float(a), open_side=int(op))
-        self.support_obs += other.support_obs
-        self.corner_obs += other.corner_obs
-        self.observations += other.observations
-        self.leg_obs += other.leg_obs
-        if other.gp_center is not None:
-            if self.gp_center is None:
-                self.gp_center, self.gp_kf = other.gp_center.copy(), other.gp_kf
-            else:
-                self.gp_center = 0.5 * (self.gp_center + other.gp_center)
-
-    # -- corrections -----------------------------------------------------------------------------
-    def transform(self, deltas: dict[int, Pose2]) -> None:
-        """Move every piece seen from keyframe ``k`` by ``deltas[k]`` (``T_map_kf_new ∘ T_map_kf_old⁻¹``)."""
-        for k, T in deltas.items():
-            m = self.point_kf == k
-            if np.any(m):
-                self.points[m] = T.transform_points(self.points[m])
-            m = self.ray_kf == k
-            if np.any(m):
-                self.ray_origin[m] = T.transform_points(self.ray_origin[m])
-                c, s = np.cos(T.yaw), np.sin(T.yaw)
-                d = self.ray_dir[m]
-                self.ray_dir[m] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
-            if self.gp_center is not None and self.gp_kf == k:
-                self.gp_center = T.transform_points(self.gp_center[None, :])[0]
-
-    def latest_keyframe(self) -> int:
-        ks = [int(self.point_kf.max()) if len(self.point_kf) else NO_KEYFRAME]
-        ks.append(int(self.ray_kf.max()) if len(self.ray_kf) else NO_KEYFRAME)
-        ks.append(self.gp_kf)
-        return max(ks)
-
-    # -- (de)serialisation -----------------------------------------------------------------------
-    def state_dict(self) -> dict:
-        return {
-            "voxel_m": self.voxel_m,
-            "points": self.points.tolist(),
-            "hits": self.hits.tolist(),
-            "point_kf": self.point_kf.tolist(),
-            "ray_origin": self.ray_origin.tolist(),
-            "ray_dir": self.ray_dir.tolist(),
-            "ray_weight": self.ray_weight.tolist(),
-            "ray_kf": self.ray_kf.tolist(),
-            "ray_app": [None if not np.isfinite(a) else float(a) for a in self.ray_app],
-            "ray_open": self.ray_open.tolist(),
-            "gp_center": None if self.gp_center is None else self.gp_center.tolist(),
-            "gp_kf": self.gp_kf,
-            "support_obs": self.support_obs,
-            "corner_obs": self.corner_obs,
-            "observations": self.observations,
-            "leg_obs": self.leg_obs,
-        }
-
-    @staticmethod
-    def from_state_dict(d: dict) -> "ObjectEvidence":
-        e = ObjectEvidence(voxel_m=float(d.get("voxel_m", 0.03)))
-        e.points = np.asarray(d.get("points", []), dtype=np.float64).reshape(-1, 2)
-        e.hits = np.asarray(d.get("hits", []), dtype=np.int64).reshape(-1)
-        e.point_kf = np.asarray(d.get("point_kf", []), dtype=np.int64).reshape(-1)
-        e.ray_origin = np.asarray(d.get("ray_origin", []), dtype=np.float64).reshape(-1, 2)
-        e.ray_dir = np.asarray(d.get("ray_dir", []), dtype=np.float64).reshape(-1, 2)
-        e.ray_weight = np.asarray(d.get("ray_weight", []), dtype=np.float64).reshape(-1)
-        e.ray_kf = np.asarray(d.get("ray_kf", []), dtype=np.int64).reshape(-1)
-        e.ray_open = np.asarray(d.get("ray_open", [0] * len(e.ray_kf)), dtype=np.int64).reshape(-1)
-        app = d.get("ray_app")
-        e.ray_app = (
-            np.full(len(e.ray_kf), np.nan)
-            if app is None
-            else np.array([np.nan if a is None else float(a) for a in app], dtype=np.float64)
-        )
-        gp = d.get("gp_center")
-        e.gp_center = None if gp is None else np.asarray(gp, dtype=np.float64).reshape(2)
-        e.gp_kf = int(d.get("gp_kf", NO_KEYFRAME))
-        e.support_obs = int(d.get("support_obs", 0))
-        e.corner_obs = int(d.get("corner_obs", 0))
-        e.observations = int(d.get("observations", 0))
-        e.leg_obs = int(d.get("leg_obs", 0))
-        if not (len(e.points) == len(e.hits) == len(e.point_kf)) or not (
-            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open)
-        ):
-            raise ValueError("object evidence: array lengths differ")
-        return e
 
 
 def _one_sided(viewpoints: FloatArray, center: FloatArray, axis: FloatArray, half: float) -> int:

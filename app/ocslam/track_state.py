@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from app.ocslam.footprint import Footprint, ObjectEvidence
+from app.ocslam.evidence import ObjectEvidence
+from app.ocslam.footprint import Footprint
 from app.ocslam.messages import CLASS_NAMES
 from app.ocslam.tracks import Track
 

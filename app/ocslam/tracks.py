@@ -1,6 +1,6 @@
 """Tracked objects (improved mode): the record of one object, its evidence and its soft decision.
 
-A :class:`Track` holds an object's :class:`~app.ocslam.footprint.ObjectEvidence` (points, bisector
+A :class:`Track` holds an object's :class:`~app.ocslam.evidence.ObjectEvidence` (points, bisector
 rays, ground-plane centres, all in the ``map`` frame), its presence confidence (paper §2.5.4) and the
 frames and boxes it was seen in. :func:`create_track`, :func:`update_track`, :func:`credit_track`
 and :func:`merge_tracks` are the only ways evidence enters a track; :func:`export_track` turns it into
@@ -24,7 +24,8 @@ from scipy.spatial import cKDTree
 from app.ocslam.candidate import Candidate
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.footprint import NO_KEYFRAME, Footprint, ObjectEvidence, estimate_footprint, min_area_rect
+from app.ocslam.evidence import NO_KEYFRAME, ObjectEvidence
+from app.ocslam.footprint import Footprint, estimate_footprint, min_area_rect
 from app.ocslam.messages import OccupancyGrid, TrackedObject
 from app.ocslam.presence import initial_presence, update_presence
 from app.ocslam.se2 import Pose2

@@ -216,7 +216,7 @@ def make_detector(cfg: Config):
     if kind == "none":
         return None
     if kind == "oracle":
-        from app.oracle import OracleDetector
+        from app.training.oracle import OracleDetector
 
         return OracleDetector(cfg.detector, np.random.default_rng(cfg.sim.seed + 7))
     from app.ocslam.detector import Detector

@@ -8,7 +8,7 @@ import json, math, sys, time
 import numpy as np
 from app.bench.detector import GtBox, Sample, coco_evaluate, run_detector
 from app.config import Config, resolve_path
-from app.labels import visible_boxes
+from app.training.labels import visible_boxes
 from app.ocslam.detector import Detector
 from app.ocslam.messages import CLASS_INDEX
 from app.ocslam.se2 import Pose2

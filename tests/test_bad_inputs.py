@@ -347,7 +347,7 @@ def render_and_report(task, opts, progress=None):
 
 
 def test_dataset_worker_that_dies_fails_the_command_instead_of_hanging(tmp_path):
-    from app.dataset import DatasetError, DatasetOptions, build_dataset
+    from app.training.dataset import DatasetError, DatasetOptions, build_dataset
 
     def stop(signum, frame):
         raise KeyboardInterrupt

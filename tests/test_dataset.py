@@ -11,8 +11,8 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.dataset import DatasetOptions, build_dataset, load_samples, make_texture, parse_imgsz, plan_worlds, sensor_effects
-from app.labels import LabelFilter
+from app.training.dataset import DatasetOptions, build_dataset, load_samples, make_texture, parse_imgsz, plan_worlds, sensor_effects
+from app.training.labels import LabelFilter
 from app.ocslam.messages import CLASS_NAMES
 
 

@@ -15,7 +15,7 @@ pytestmark = [pytest.mark.train, pytest.mark.slow]
 
 
 def _opts(tmp: Path, data: Path, **kw):
-    from app.training import TrainOptions
+    from app.training.train import TrainOptions
 
     return TrainOptions(
         data=data, imgsz=64, epochs=2, hours=None, batch=4, workers=0, cache=False,
@@ -25,7 +25,7 @@ def _opts(tmp: Path, data: Path, **kw):
 
 
 def _lr_rows(run: Path) -> list[dict[str, float]]:
-    from app.training import _metrics_from_csv
+    from app.training.train import _metrics_from_csv
 
     return _metrics_from_csv(run / "results.csv")[0]
 
@@ -34,7 +34,7 @@ def test_resume_continues_the_same_run_for_one_more_epoch(tmp_path: Path) -> Non
     pytest.importorskip("ultralytics")
     import torch
 
-    from app.training import train_detector
+    from app.training.train import train_detector
 
     data = _tiny_dataset(tmp_path / "data")
     first = train_detector(_opts(tmp_path, data, session_epochs=1), log=lambda *_: None)
@@ -62,7 +62,7 @@ def test_resume_continues_the_same_run_for_one_more_epoch(tmp_path: Path) -> Non
 
 def test_resume_without_a_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
     pytest.importorskip("ultralytics")
-    from app.training import train_detector
+    from app.training.train import train_detector
 
     data = _tiny_dataset(tmp_path / "data")
     with pytest.raises(FileNotFoundError, match="no checkpoint"):

@@ -54,7 +54,7 @@ def test_train_wrapper_smoke(tmp_path: Path) -> None:
     from app.ocslam.config import DetectorConfig
     from app.ocslam.detector import Detector
     from app.ocslam.messages import Image
-    from app.training import TrainOptions, train_detector
+    from app.training.train import TrainOptions, train_detector
 
     data = _tiny_dataset(tmp_path / "data")
     opts = TrainOptions(

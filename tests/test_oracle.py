@@ -12,7 +12,7 @@ from app.ocslam.config import DetectorConfig
 from app.ocslam.detector import DetectorError
 from app.ocslam.messages import CLASS_INDEX
 from app.ocslam.se2 import Pose2
-from app.oracle import OracleDetector
+from app.training.oracle import OracleDetector
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +47,7 @@ def exact_cfg(**kw) -> DetectorConfig:
 
 def test_oracle_boxes_are_the_visible_boxes(scene) -> None:
     world, frame, gt = scene
-    from app.labels import visible_boxes
+    from app.training.labels import visible_boxes
 
     vis = visible_boxes(frame.segmentation)
     dets = OracleDetector(exact_cfg(), np.random.default_rng(0), world=world).detect(frame, gt)

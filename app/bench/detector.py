@@ -6,7 +6,7 @@
     ocslam bench detector --model assets/models/detector-v3.onnx --model assets/models/detector.onnx   # both, and their latency ratio
     ocslam bench detector --compare                # the same: the card's previous model against detector.model_path
 
-Ground truth comes from the simulator's segmentation (app/labels.py). Objects that are visible but
+Ground truth comes from the simulator's segmentation (app/training/labels.py). Objects that are visible but
 fail the label filter (slivers, mostly hidden) are COCO ``iscrowd`` ignore regions: a detection on
 them is neither a true nor a false positive. mAP50 and mAP50-95 are pycocotools' (all areas, 100
 detections per image); precision and recall use pycocotools' IoU-0.5 matching of the detections at or
@@ -318,7 +318,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _load_samples(args: argparse.Namespace, quiet: bool) -> tuple[list[Sample], str]:
-    from app import dataset
+    from app.training import dataset
 
     if args.data is not None:
         return dataset.load_samples(args.data, args.split), f"{args.data} ({args.split})"

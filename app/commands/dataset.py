@@ -39,8 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.dataset import DatasetOptions, build_dataset, command_line, parse_imgsz
-    from app.labels import LabelFilter
+    from app.training.dataset import DatasetOptions, build_dataset, command_line, parse_imgsz
+    from app.training.labels import LabelFilter
 
     if args.worlds < 0 or args.per_world < 1:
         print("ocslam: error: dataset: --worlds must be ≥ 0 and --per-world ≥ 1", file=sys.stderr)
@@ -69,12 +69,12 @@ def run(args: argparse.Namespace) -> int:
     )
     import signal
 
-    from app.dataset import DatasetError
+    from app.training.dataset import DatasetError
 
     def _stop(signum, frame):  # SIGTERM (e.g. kill of a background run) stops the worker processes too
         raise KeyboardInterrupt
 
-    old = signal.signal(signal.SIGTERM, _stop)  # the workers reset it to the default (app.dataset._init_worker)
+    old = signal.signal(signal.SIGTERM, _stop)  # the workers reset it to the default (app.training.dataset._init_worker)
     try:
         meta = build_dataset(opts, progress=not args.quiet)
     except DatasetError as e:

@@ -29,7 +29,7 @@ import argparse
 from pathlib import Path
 
 
-#: The dataset recipe of the committed model (app.dataset.DatasetOptions defaults).
+#: The dataset recipe of the committed model (app.training.dataset.DatasetOptions defaults).
 DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out {out}"
 #: The calibration renders of the committed int8 model (six training worlds and the apartment, the app's 320×240).
 CALIB_DATASET_COMMAND = (
@@ -84,7 +84,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
-    from app.training import TrainingUnavailable, TrainOptions, train_detector
+    from app.training.train import TrainingUnavailable, TrainOptions, train_detector
 
     if args.optimize is not None:
         return _optimize(args)
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"ocslam train-detector: {args.data} exists but has no data.yaml", file=sys.stderr)
         return 2
     if not (args.data / "data.yaml").exists() and not args.data.is_file():
-        from app.dataset import DatasetOptions, build_dataset
+        from app.training.dataset import DatasetOptions, build_dataset
 
         recipe = DatasetOptions(out=args.data)
         recipe.command = DEFAULT_DATASET_COMMAND.format(out=args.data)
@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     calib = args.calib
     if not (calib / "data.yaml").exists():
-        from app.dataset import DatasetOptions, build_dataset
+        from app.training.dataset import DatasetOptions, build_dataset
 
         recipe = DatasetOptions(out=calib, worlds=6, per_world=15, seed=1, imgsz=(320, 240), val_fraction=0.0,
                                 apartment_images=30)
@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
 def _optimize(args: argparse.Namespace) -> int:
     import sys
 
-    from app.training import optimize_for_inference
+    from app.training.train import optimize_for_inference
 
     try:
         w, h = (int(v) for v in str(args.static).lower().split("x"))

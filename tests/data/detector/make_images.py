@@ -8,7 +8,7 @@ import math, sys
 from pathlib import Path
 import cv2, numpy as np, yaml
 from app.config import Config, resolve_path
-from app.labels import LabelFilter, SilhouetteRenderer, make_labels
+from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld

@@ -4,7 +4,7 @@ It measures the fusion (Consciousness) apart from the network: the same :class:`
 detector, but every box comes from ground truth. A box is reported for each classified object with at
 least ``cfg.oracle_min_pixels`` visible pixels and, when the world is known, at least
 ``cfg.oracle_min_visible_fraction`` of its unoccluded, untruncated silhouette visible (the same measure
-that filters the training labels, :mod:`app.labels`). Realism:
+that filters the training labels, :mod:`app.training.labels`). Realism:
 
 - the box is the tight box of the visible pixels with each edge moved by ``N(0, oracle_box_jitter_px)``;
 - the confidence is ``N(oracle_confidence_mean, oracle_confidence_std)`` lowered by ``0.3·(1 − visible
@@ -22,7 +22,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from app.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes
+from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes
 from app.ocslam.config import DetectorConfig
 from app.ocslam.detector import DetectorError
 from app.ocslam.messages import CLASS_INDEX, Detection, Detections, GroundTruthObject

@@ -3,13 +3,13 @@
 For each world (random apartments from ``random_world(seed)`` and, for training, the paper's apartment)
 one process renders camera views at robot height: looking at objects from all sides and distances
 (often off-centre, so objects are truncated by the frame edge), along the world's routes, and from
-random free poses. Labels come from the segmentation mask (:mod:`app.labels`): the tight box of each
+random free poses. Labels come from the segmentation mask (:mod:`app.training.labels`): the tight box of each
 object's visible pixels, kept when enough of the object is visible.
 
 **Visible fraction.** ``visible pixels / unoccluded pixels``. The unoccluded count comes from a second
 render of the object *alone* (its own small pybullet client) through an off-centre projection that
 covers exactly the object's projected bounding box on the camera's image plane extended past the frame,
-at the same pixel scale (:class:`app.labels.SilhouetteRenderer`). Occlusion by other geometry and
+at the same pixel scale (:class:`app.training.labels.SilhouetteRenderer`). Occlusion by other geometry and
 truncation by the side and bottom frame edges therefore both lower the fraction, with the renderer's
 own rasterisation on both sides of the ratio (a fully visible object scores 1.0). What lies above the
 top edge does not count: the robot's low, level camera cuts every door, shelf and person there.
@@ -51,7 +51,7 @@ import cv2
 import numpy as np
 import yaml
 
-from app.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes, yolo_lines
+from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes, yolo_lines
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
 
 __all__ = [

@@ -6,9 +6,10 @@ render's own segmentation (objects >= 400 px at 640x480; smaller ones are ignore
 """
 import json, math, sys, time
 import numpy as np
-from app.bench.detector import GtBox, Sample, coco_evaluate, run_detector
+from app.bench.detector import coco_evaluate, run_detector
 from app.config import Config, resolve_path
 from app.training.labels import visible_boxes
+from app.training.samples import GtBox, Sample
 from app.ocslam.detector import Detector
 from app.ocslam.messages import CLASS_INDEX
 from app.ocslam.se2 import Pose2

@@ -11,9 +11,17 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.training.dataset import DatasetOptions, build_dataset, load_samples, make_texture, parse_imgsz, plan_worlds, sensor_effects
-from app.training.labels import LabelFilter
 from app.ocslam.messages import CLASS_NAMES
+from app.training.dataset import (
+    DatasetOptions,
+    build_dataset,
+    make_texture,
+    parse_imgsz,
+    plan_worlds,
+    sensor_effects,
+)
+from app.training.labels import LabelFilter
+from app.training.samples import load_samples
 
 
 @settings(max_examples=60, deadline=None)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.bench.detector import GtBox, Sample, coco_evaluate
+from app.bench.detector import coco_evaluate
+from app.training.samples import GtBox, Sample
 
 
 def _samples() -> list[Sample]:

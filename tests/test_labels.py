@@ -8,7 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.training.labels import LabelFilter, frustum_matrix, make_labels, silhouette_window, visible_boxes, yolo_lines
+from app.training.labels import (
+    LabelFilter,
+    frustum_matrix,
+    make_labels,
+    silhouette_window,
+    visible_boxes,
+    yolo_lines,
+)
 
 
 def test_visible_boxes_are_tight() -> None:
@@ -127,10 +134,10 @@ def _sphere_box(c_cam: np.ndarray, r: float, K: np.ndarray) -> tuple[float, floa
 
 def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
     from app.config import Config
-    from app.training.labels import SilhouetteRenderer
     from app.ocslam.messages import CLASS_INDEX
     from app.ocslam.se2 import Pose2
     from app.sim_world import SimWorld
+    from app.training.labels import SilhouetteRenderer
     from app.worlds import World, WorldObject
 
     world = World(
@@ -175,9 +182,9 @@ def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
 def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:
     """The low camera cuts a person at 1 m at the top edge: still fully 'visible'; cut at the side, not."""
     from app.config import Config
-    from app.training.labels import SilhouetteRenderer
     from app.ocslam.se2 import Pose2
     from app.sim_world import SimWorld
+    from app.training.labels import SilhouetteRenderer
     from app.worlds import World, WorldObject
 
     world = World(name="person", objects=[WorldObject("person", "person", 1.0, 0.0, yaw=3.14)])

@@ -21,7 +21,7 @@ import io
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
@@ -29,43 +29,13 @@ import numpy as np
 
 from app.bench.common import print_json, table
 from app.ocslam.messages import CLASS_NAMES
+from app.training.samples import Sample, load_samples
 
 #: The paper's row (spec §6, Fig. 12): YOLOv8-nano, 224 px, batch 64, 237 epochs, RTX 3050.
 PAPER = {"precision": 0.899, "images_per_s": 625.0, "hardware": "RTX 3050 GPU"}
 #: Targets of issue 10 (latency: at the app's input, 2 threads, pre- and post-processing included).
 TARGETS = {"map50": 0.95, "precision": 0.95, "recall": 0.92, "per_class": 0.90, "latency_app_2_ms": 3.0,
            "speedup_vs_previous": 3.0}
-
-
-@dataclass(frozen=True)
-class GtBox:
-    class_id: int
-    x1: float
-    y1: float
-    x2: float
-    y2: float
-    ignore: bool = False
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One evaluation image: a file (or an in-memory RGB array) and its ground-truth boxes."""
-
-    path: Path | None
-    width: int
-    height: int
-    boxes: tuple[GtBox, ...]
-    rgb: np.ndarray | None = None
-
-    def load(self) -> np.ndarray:
-        if self.rgb is not None:
-            return self.rgb
-        import cv2
-
-        bgr = cv2.imread(str(self.path), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise FileNotFoundError(f"cannot read image {self.path}")
-        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
 def coco_ground_truth(samples: Sequence[Sample]) -> dict[str, Any]:
@@ -321,7 +291,7 @@ def _load_samples(args: argparse.Namespace, quiet: bool) -> tuple[list[Sample], 
     from app.training import dataset
 
     if args.data is not None:
-        return dataset.load_samples(args.data, args.split), f"{args.data} ({args.split})"
+        return load_samples(args.data, args.split), f"{args.data} ({args.split})"
     tmp = Path(tempfile.mkdtemp(prefix="ocslam-bench-detector-"))
     w, h = dataset.parse_imgsz(args.imgsz)
     dataset.build_dataset(
@@ -338,7 +308,7 @@ def _load_samples(args: argparse.Namespace, quiet: bool) -> tuple[list[Sample], 
         progress=not quiet,
     )
     desc = f"{args.worlds} held-out random worlds × {args.per_world} images, seed {args.seed}, {w}×{h}"
-    return dataset.load_samples(tmp, "val"), desc
+    return load_samples(tmp, "val"), desc
 
 
 def _describe(det) -> str:

@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
 #: The dataset recipe of the committed model (app.training.dataset.DatasetOptions defaults).
 DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out {out}"
 #: The calibration renders of the committed int8 model (six training worlds and the apartment, the app's 320×240).

@@ -51,13 +51,12 @@ import cv2
 import numpy as np
 import yaml
 
-from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes, yolo_lines
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
+from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes, yolo_lines
 
 __all__ = [
     "DatasetOptions",
     "build_dataset",
-    "load_samples",
     "parse_imgsz",
     "plan_worlds",
     "render_world",
@@ -700,28 +699,6 @@ def build_dataset(opts: DatasetOptions, progress: bool = True, *, render: Callab
     )
     meta["class_counts"] = counts
     return meta
-
-
-def load_samples(data_dir: str | Path, split: str = "val"):
-    """Evaluation samples (``app.bench.detector.Sample``) of a dataset split (``train``, ``val`` or ``all``),
-    with not-kept visible objects as ignore boxes."""
-    from app.bench.detector import GtBox, Sample
-
-    data_dir = Path(data_dir)
-    splits = ("train", "val") if split == "all" else (split,)
-    out = []
-    for s in splits:
-        f = data_dir / f"annotations_{s}.json"
-        if not f.exists():
-            raise FileNotFoundError(f"{f} not found: make the dataset with `ocslam dataset --out {data_dir}`")
-        d = json.loads(f.read_text())
-        by_img: dict[int, list] = {}
-        for a in d["annotations"]:
-            x, y, w, h = a["bbox"]
-            by_img.setdefault(a["image_id"], []).append(GtBox(a["category_id"] - 1, x, y, x + w, y + h, bool(a["iscrowd"])))
-        for im in d["images"]:
-            out.append(Sample(data_dir / im["file_name"], im["width"], im["height"], tuple(by_img.get(im["id"], ()))))
-    return out
 
 
 def command_line(argv: Sequence[str] | None = None) -> str:

@@ -22,10 +22,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes
 from app.ocslam.config import DetectorConfig
 from app.ocslam.detector import DetectorError
 from app.ocslam.messages import CLASS_INDEX, Detection, Detections, GroundTruthObject
+from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes
 
 __all__ = ["OracleDetector"]
 

@@ -12,15 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.ocslam.messages import CLASS_NAMES
-from app.training.dataset import (
-    DatasetOptions,
-    build_dataset,
-    make_texture,
-    parse_imgsz,
-    plan_worlds,
-    sensor_effects,
-)
+from app.training.dataset import DatasetOptions, build_dataset, parse_imgsz, plan_worlds
 from app.training.labels import LabelFilter
+from app.training.randomization import make_texture, sensor_effects
 from app.training.samples import load_samples
 
 

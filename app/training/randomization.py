@@ -1,0 +1,257 @@
+"""Domain randomisation of the dataset renders (``ocslam dataset``, see :mod:`app.training.dataset`).
+
+Per world, re-drawn every ``rerandomize_every`` images by :class:`Randomizer`: light direction, colour
+and intensity (ambient/diffuse/specular, sometimes shadows); floor and wall colours and procedural
+textures (:func:`make_texture`: planks, tiles, checker, carpet noise, stripes, marble, plain) on overlay
+meshes; object colour jitter; distractor objects of no class (``pybullet_data/random_urdfs``, scaled and
+recoloured). Per image, :func:`sensor_effects`: gamma/contrast/colour balance, blur, motion blur,
+Gaussian noise. Every draw comes from the caller's ``np.random.Generator``, so a seeded dataset is
+reproducible.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+__all__ = ["TEXTURE_KINDS", "Randomizer", "make_texture", "sensor_effects"]
+
+
+def _hsv(h: float, s: float, v: float) -> tuple[float, float, float]:
+    import colorsys
+
+    return colorsys.hsv_to_rgb(h % 1.0, min(max(s, 0), 1), min(max(v, 0), 1))
+
+
+def make_texture(kind: str, rng: np.random.Generator, size: int = 128) -> np.ndarray:
+    """A procedural ``(size, size, 3)`` uint8 RGB texture that tiles: planks, tiles, checker, carpet,
+    stripes, marble or plain."""
+    base = np.array(_hsv(rng.random(), rng.uniform(0.05, 0.6), rng.uniform(0.3, 0.95)))
+    alt = np.array(_hsv(rng.random(), rng.uniform(0.0, 0.6), rng.uniform(0.2, 0.95)))
+    yy, xx = np.mgrid[0:size, 0:size] / size
+    grain = rng.normal(0.0, 1.0, (size, size))
+    if kind == "planks":
+        n = int(rng.integers(3, 9))
+        band = np.floor(yy * n).astype(int)
+        tint = rng.uniform(0.8, 1.15, n)[band]
+        line = (np.abs((yy * n) % 1.0) < 0.04) * 0.35
+        g = cv2.GaussianBlur(grain, (0, 0), sigmaX=6, sigmaY=0.7) * 0.25
+        img = base[None, None] * (tint * (1 + g) * (1 - line))[..., None]
+    elif kind == "tiles":
+        n = int(rng.integers(2, 6))
+        grout = ((xx * n) % 1.0 < 0.05) | ((yy * n) % 1.0 < 0.05)
+        img = np.where(grout[..., None], alt[None, None] * 0.6, base[None, None] * (1 + 0.05 * grain[..., None]))
+    elif kind == "checker":
+        n = int(rng.integers(2, 5)) * 2
+        c = ((np.floor(xx * n) + np.floor(yy * n)) % 2).astype(bool)
+        img = np.where(c[..., None], base[None, None], alt[None, None])
+    elif kind == "carpet":
+        g = cv2.GaussianBlur(grain, (0, 0), 1.2)
+        img = base[None, None] * (1 + 0.35 * g[..., None] / max(g.std(), 1e-6) * 0.3)
+    elif kind == "stripes":
+        n = int(rng.integers(4, 16))
+        c = (np.floor(xx * n) % 2).astype(bool)
+        img = np.where(c[..., None], base[None, None], base[None, None] * 0.5 + alt[None, None] * 0.5)
+    elif kind == "marble":
+        g = cv2.GaussianBlur(grain, (0, 0), 10)
+        g = g / max(np.abs(g).max(), 1e-6)
+        v = 0.5 + 0.5 * np.sin((xx + yy) * 12 + 6 * g)
+        img = base[None, None] * (1 - 0.3 * v[..., None]) + alt[None, None] * 0.3 * v[..., None]
+    else:  # plain
+        img = np.broadcast_to(base[None, None], (size, size, 3)) * (1 + 0.03 * grain[..., None])
+    return np.clip(img * 255.0, 0, 255).astype(np.uint8)
+
+
+TEXTURE_KINDS = ("planks", "tiles", "checker", "carpet", "stripes", "marble", "plain")
+
+
+def _quad_mesh_args(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]) -> dict[str, Any]:
+    """pybullet ``createVisualShape(GEOM_MESH, ...)`` arguments for planar quads ``(origin, u_vec, v_vec, tile)``
+    (corners ``o``, ``o+u``, ``o+u+v``, ``o+v``), texture repeating every ``tile`` metres."""
+    verts, idx, uvs, normals = [], [], [], []
+    for o, u, v, tile in quads:
+        n = np.cross(u, v)
+        n = n / (np.linalg.norm(n) or 1.0)
+        k = len(verts)
+        lu, lv = np.linalg.norm(u) / tile, np.linalg.norm(v) / tile
+        for c, uv in ((o, (0, 0)), (o + u, (lu, 0)), (o + u + v, (lu, lv)), (o + v, (0, lv))):
+            verts.append(c.tolist())
+            uvs.append(list(uv))
+            normals.append(n.tolist())
+        idx += [k, k + 1, k + 2, k, k + 2, k + 3]
+    return dict(vertices=verts, indices=idx, uvs=uvs, normals=normals)
+
+
+class Randomizer:
+    """Domain randomisation of one :class:`SimWorld` (all changes through ``sim.client``)."""
+
+    def __init__(self, sim, rng: np.random.Generator, tmpdir: Path, distractors: tuple[int, int] = (2, 8)) -> None:
+        import pybullet as p
+
+        self.p, self.sim, self.rng, self.cid = p, sim, rng, sim.client
+        self.tmpdir = Path(tmpdir)
+        self.n_distractors = distractors
+        self.distractor_bodies: list[int] = []
+        self.distractor_discs: list[tuple[float, float, float]] = []
+        self._tex_count = 0
+        self.original_rgba = {
+            b: tuple(p.getVisualShapeData(b, physicsClientId=self.cid)[0][7])
+            for ids in sim.object_body_ids.values()
+            for b in ids
+            if p.getVisualShapeData(b, physicsClientId=self.cid)
+        }
+        import pybullet_data
+
+        self.urdfs = sorted((Path(pybullet_data.getDataPath()) / "random_urdfs").glob("*/*.urdf"))
+        self._blocking = None
+        self.floor_overlay = self._make_floor_overlay()
+        self.wall_overlay = self._make_wall_overlay()
+
+    # -- overlays (textured surfaces) --------------------------------------------------------
+    def _make_floor_overlay(self) -> int:
+        p, cid = self.p, self.cid
+        xmin, ymin, xmax, ymax = self.sim.world.bounds()
+        o = np.array([xmin - 1, ymin - 1, 0.0008])
+        args = _quad_mesh_args([(o, np.array([xmax - xmin + 2, 0, 0]), np.array([0, ymax - ymin + 2, 0]), 1.0)])
+        vs = p.createVisualShape(p.GEOM_MESH, physicsClientId=cid, **args)
+        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
+
+    def _make_wall_overlay(self) -> int | None:
+        p, cid = self.p, self.cid
+        quads = []
+        for wall in self.sim.world.walls:
+            c, s = math.cos(wall.yaw), math.sin(wall.yaw)
+            d = np.array([c, s, 0.0])
+            nrm = np.array([-s, c, 0.0])
+            for s0, s1, z0, z1, th, _ in wall.boxes():
+                for side in (1.0, -1.0):
+                    base = np.array([*wall.point_at(s0), z0]) + side * nrm * (th / 2 + 0.002)
+                    u = d * (s1 - s0)
+                    v = np.array([0, 0, z1 - z0])
+                    # outward normal: u × v must point along side·nrm
+                    if np.dot(np.cross(u, v), side * nrm) < 0:
+                        quads.append((base + u, -u, v, 1.0))
+                    else:
+                        quads.append((base, u, v, 1.0))
+        if not quads:
+            return None
+        vs = p.createVisualShape(p.GEOM_MESH, physicsClientId=cid, **_quad_mesh_args(quads))
+        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
+
+    def _texture(self, kinds: Sequence[str] = TEXTURE_KINDS) -> int:
+        img = make_texture(str(self.rng.choice(list(kinds))), self.rng)
+        path = self.tmpdir / f"tex{self._tex_count}.png"
+        self._tex_count += 1
+        cv2.imwrite(str(path), img[:, :, ::-1])
+        return self.p.loadTexture(str(path), physicsClientId=self.cid)
+
+    # -- scene -------------------------------------------------------------------------------
+    def randomize_scene(self) -> None:
+        p, cid, rng = self.p, self.cid, self.rng
+        # floor and walls: a texture (or plain colour) on the overlays
+        p.changeVisualShape(self.floor_overlay, -1, textureUniqueId=self._texture(), rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        if self.wall_overlay is not None:
+            kinds = ("plain", "plain", "stripes", "tiles", "marble", "carpet")
+            p.changeVisualShape(self.wall_overlay, -1, textureUniqueId=self._texture(kinds), rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        # object colours: jitter every part around its catalogue colour, sometimes a bold new hue
+        for b, rgba in self.original_rgba.items():
+            if rng.random() < 0.12:
+                rgb = _hsv(rng.random(), rng.uniform(0.2, 0.9), rng.uniform(0.25, 0.95))
+            else:
+                import colorsys
+
+                h, s, v = colorsys.rgb_to_hsv(*[min(max(c, 0.0), 1.0) for c in rgba[:3]])
+                rgb = _hsv(h + rng.uniform(-0.04, 0.04), s * rng.uniform(0.7, 1.3), v * rng.uniform(0.7, 1.25))
+            p.changeVisualShape(b, -1, rgbaColor=[*rgb, 1.0], physicsClientId=cid)
+        self._place_distractors()
+
+    def _blocking_union(self):
+        if self._blocking is None:
+            from shapely.ops import unary_union
+
+            self._blocking = unary_union([g for _, g in self.sim.world.blocking_geometry()])
+        return self._blocking
+
+    def _place_distractors(self) -> None:
+        p, cid, rng = self.p, self.cid, self.rng
+        for b in self.distractor_bodies:
+            p.removeBody(b, physicsClientId=cid)
+        self.distractor_bodies, self.distractor_discs = [], []
+        if not self.urdfs or self.n_distractors[1] <= 0:
+            return
+        from shapely.geometry import Point
+
+        blocking = self._blocking_union()
+        xmin, ymin, xmax, ymax = self.sim.world.bounds()
+        want = int(rng.integers(self.n_distractors[0], self.n_distractors[1] + 1))
+        tries = 0
+        while len(self.distractor_bodies) < want and tries < want * 8:
+            tries += 1
+            urdf = self.urdfs[int(rng.integers(len(self.urdfs)))]
+            scale = float(rng.uniform(2.0, 7.0))
+            x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
+            q = p.getQuaternionFromEuler([0, 0, rng.uniform(-math.pi, math.pi)])
+            try:
+                b = p.loadURDF(str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, physicsClientId=cid)
+            except Exception:
+                continue
+            lo, hi = p.getAABB(b, -1, physicsClientId=cid)
+            for j in range(p.getNumJoints(b, physicsClientId=cid)):
+                a0, a1 = p.getAABB(b, j, physicsClientId=cid)
+                lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
+            r = 0.5 * math.hypot(hi[0] - lo[0], hi[1] - lo[1])
+            cx, cy = (lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2
+            if r > 0.6 or blocking.intersects(Point(cx, cy).buffer(r + 0.05)) or any(
+                math.hypot(cx - dx, cy - dy) < r + dr for dx, dy, dr in self.distractor_discs
+            ):
+                p.removeBody(b, physicsClientId=cid)
+                continue
+            pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=cid)
+            p.resetBasePositionAndOrientation(b, [pos[0], pos[1], pos[2] - lo[2]], orn, physicsClientId=cid)
+            for j in range(-1, p.getNumJoints(b, physicsClientId=cid)):
+                rgb = _hsv(rng.random(), rng.uniform(0.0, 0.9), rng.uniform(0.2, 0.95))
+                p.changeVisualShape(b, j, rgbaColor=[*rgb, 1.0], physicsClientId=cid)
+            self.distractor_bodies.append(b)
+            self.distractor_discs.append((cx, cy, r))
+
+    def free_for_camera(self, x: float, y: float) -> bool:
+        return self.sim.pose_free(x, y) and all(math.hypot(x - dx, y - dy) > dr + 0.15 for dx, dy, dr in self.distractor_discs)
+
+    def sample_light(self) -> dict[str, Any]:
+        rng = self.rng
+        az, el = rng.uniform(-math.pi, math.pi), rng.uniform(0.35, 1.45)
+        warm = rng.uniform(-0.12, 0.12)
+        return dict(
+            lightDirection=[math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)],
+            lightColor=[1.0 + warm, 1.0, 1.0 - warm],
+            lightAmbientCoeff=float(rng.uniform(0.35, 0.8)),
+            lightDiffuseCoeff=float(rng.uniform(0.2, 0.7)),
+            lightSpecularCoeff=float(rng.uniform(0.0, 0.3)),
+            shadow=int(rng.random() < 0.2),
+        )
+
+
+def sensor_effects(rgb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Camera-like degradations: exposure/contrast/gamma, colour balance, blur or motion blur, noise."""
+    img = rgb.astype(np.float32) / 255.0
+    gain = rng.uniform(0.75, 1.25) * rng.uniform(0.93, 1.07, 3)
+    img = np.clip((img - 0.5) * rng.uniform(0.8, 1.2) + 0.5, 0, 1) * gain.astype(np.float32)
+    img = np.clip(img, 0, 1) ** rng.uniform(0.8, 1.25)
+    r = rng.random()
+    if r < 0.25:
+        img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.4, 1.2))
+    elif r < 0.35:
+        k = int(rng.integers(3, 8))
+        kernel = np.zeros((k, k), np.float32)
+        kernel[k // 2, :] = 1.0 / k
+        if rng.random() < 0.3:
+            kernel = kernel.T
+        img = cv2.filter2D(img, -1, kernel)
+    sigma = rng.uniform(0.5, 7.0) / 255.0
+    img = img + rng.normal(0.0, sigma, img.shape).astype(np.float32)
+    return np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)

@@ -20,7 +20,7 @@ def test_static_model_and_fast_dfl_keep_the_outputs(tmp_path: Path) -> None:
     pytest.importorskip("onnxslim")
     import onnxruntime as ort
 
-    from app.training.train import static_model
+    from app.training.optimize import static_model
 
     out = tmp_path / "static.onnx"
     summary = static_model(FLOAT, out, 224, 192)

@@ -156,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
 def _optimize(args: argparse.Namespace) -> int:
     import sys
 
-    from app.training.train import optimize_for_inference
+    from app.training.optimize import optimize_for_inference
 
     try:
         w, h = (int(v) for v in str(args.static).lower().split("x"))

@@ -369,7 +369,7 @@ def test_a_failed_egl_load_falls_back_to_tiny_with_a_message(monkeypatch, caplog
     monkeypatch.setenv(sim_world.EGL_PLUGIN_ENV, _ctypes.__file__)
     monkeypatch.delenv(sim_world.EGL_PROBE_ENV, raising=False)
     monkeypatch.setattr(sim_world.resolve_renderer, "_warned", False, raising=False)
-    with caplog.at_level(logging.WARNING, logger="app.sim_world"):
+    with caplog.at_level(logging.WARNING, logger="app.sim.renderer"):
         with SimWorld(box_room(), quiet_config(**{"sim.renderer": "auto"}), seed=0) as sim:
             assert sim.renderer == "tiny"
             assert "fallback" in sim.renderer_note and "EGL probe exited" in sim.renderer_note

@@ -88,7 +88,7 @@ class CameraWorker:
                  frame_timeout_s: float = 15.0, warmup: tuple[int, int] | None = None) -> None:
         """``warmup``: a ``(width, height)`` frame rendered (and dropped) before the worker reports ready.
         :attr:`renderer` / :attr:`renderer_note`: what the process renders with (``"egl"`` or ``"tiny"``)."""
-        from app.sim_world import resolve_renderer
+        from app.sim.renderer import resolve_renderer
 
         # probes EGL once here (the verdict reaches the child through the environment); a forced but
         # unavailable EGL fails here, with the reason

@@ -31,7 +31,8 @@ log = logging.getLogger(__name__)
 
 
 class OcslamApp:
-    """The live app: simulation loop thread + viser server + UI."""
+    """The live app: simulation loop thread + viser server + UI. Its commands are what the panels call
+    (it implements :class:`app.ui.commands.GuiCommands`)."""
 
     def __init__(self, cfg: Config, *, pipeline: Any = None) -> None:
         from app.pipeline import Pipeline
@@ -70,7 +71,7 @@ class OcslamApp:
         self.real_time_factor = 0.0
         self.ticks = 0
         self.layers = SceneLayers(self.server, self.pipeline)
-        self.panels = Panels(self)
+        self.panels = Panels(self.server, self.layers, self)
         self._install_scene_click()
         self._set_initial_camera()
         self._stop = threading.Event()
@@ -188,9 +189,9 @@ class OcslamApp:
     # ------------------------------------------------------------------------------------------
     def notify(self, client: Any, title: str, body: str, color: str = "blue") -> None:
         """A one-line notification (see :func:`app.ui.security.safe_message`) to ``client`` (None: all)."""
-        from app.ui.panels import _notify
+        from app.ui.panels import notify_clients
 
-        _notify(client, self.server, title, safe_message(body), color)
+        notify_clients(client, self.server, title, safe_message(body), color)
 
     def _on_refused(self, client_id: int, message: str) -> None:
         client = self.server.get_clients().get(client_id)
@@ -223,6 +224,9 @@ class OcslamApp:
     def _refuse(self, client: Any, title: str, e: Exception) -> None:
         log.warning("%s: %s", title, e)
         self.notify(client, title, str(e), "red")
+
+    def teleop_key(self, key: str) -> None:
+        self.teleop.press(key)
 
     def toggle_pause(self) -> None:
         self.paused = not self.paused
@@ -272,7 +276,7 @@ class OcslamApp:
 
         Only worlds the dropdown offered can be named (:attr:`Panels.world_paths`). Reading,
         validating and building the new pipeline run in a helper thread, so the loop and every
-        other client go on meanwhile (an over-limit world is refused by ``app.worlds`` validation
+        other client go on meanwhile (an over-limit world is refused by ``app.world.validation``
         before anything heavy); only the swap runs in the loop thread. One load at a time.
         ``wait``: block until done (tests).
         """
@@ -291,7 +295,7 @@ class OcslamApp:
 
     def _load_world_worker(self, choice: str, path: Path, client: Any) -> None:
         from app.pipeline import Pipeline
-        from app.worlds import load_world
+        from app.world.format import load_world
 
         try:
             try:

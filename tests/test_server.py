@@ -146,3 +146,40 @@ def test_record_toggle_writes_a_rosbag2_bag_under_the_runs_directory(tmp_path) -
     finally:
         c.close()
         a.stop()
+
+
+def test_the_app_implements_every_gui_command(app) -> None:
+    """The panels reach the server only through :class:`GuiCommands`: the app has each of its members, and
+    each command takes the parameters the protocol names, of the same kind."""
+    import inspect
+
+    from app.ui.commands import GuiCommands
+
+    names = [n for n in vars(GuiCommands) if not n.startswith("_")]
+    assert {"submit", "load_world", "top_down_view", "focus_object", "save_config", "start_recording"} <= set(names)
+    for n in names:
+        assert hasattr(app, n), f"OcslamApp lacks {n}"
+        member = vars(GuiCommands)[n]
+        if isinstance(member, property):
+            continue
+        have = inspect.signature(getattr(app, n)).parameters
+        for pname, p in inspect.signature(member).parameters.items():
+            if pname != "self":
+                assert pname in have and have[pname].kind == p.kind, f"OcslamApp.{n}: parameter {pname}"
+
+
+def test_the_ui_package_never_imports_the_server() -> None:
+    import ast
+    from pathlib import Path
+
+    import app.ui
+
+    bad = []
+    for f in sorted(Path(app.ui.__file__).parent.rglob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or ""] + [f"{node.module}.{a.name}" for a in node.names]
+            if any(n == "app.server" or n.startswith("app.server.") for n in names):
+                bad.append(f"{f.name}:{node.lineno}")
+    assert not bad, f"app/ui imports app.server: {bad}"

@@ -1,6 +1,7 @@
 """GUI panels: Drive (camera, teleop, autonomy), Tune (every live config field), Objects, Metrics,
-Layers and Session. Callbacks run on viser's thread pool: they only queue work for the loop
-(``app.submit``) or flip plain flags; they never touch pybullet or the estimators directly.
+Layers and Session. Callbacks run on viser's thread pool: they issue the app's commands
+(:class:`~app.ui.commands.GuiCommands`: ``app.submit`` queues work for the loop) or flip plain flags;
+they never touch pybullet or the estimators directly, and never import the server.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import math
 import time
 from collections import deque
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable
 
 import cv2
 import numpy as np
@@ -19,11 +20,9 @@ import viser
 import viser.uplot
 
 from app.config import ASSETS, Config, ConfigError, PROJECT_ROOT
-from app.ui.scene import LAYERS
+from app.ui.commands import GuiCommands
+from app.ui.scene import LAYERS, SceneLayers
 from app.ui.teleop import MOVE_BINDINGS
-
-if TYPE_CHECKING:
-    from app.server import OcslamApp
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +43,8 @@ HOTKEYS: tuple[tuple[str, str, str], ...] = (
 HOLD_BUTTONS: tuple[tuple[str, str], ...] = (("Forward", "i"), ("Left", "j"), ("Stop", "k"), ("Right", "l"), ("Back", ","))
 
 
-def _notify(client: Any, server: viser.ViserServer, title: str, body: str, color: str = "red") -> None:
+def notify_clients(client: Any, server: viser.ViserServer, title: str, body: str, color: str = "red") -> None:
+    """A notification to ``client`` (None: every client of ``server``); a client that left is skipped."""
     targets = [client] if client is not None else list(server.get_clients().values())
     for c in targets:
         try:
@@ -92,9 +92,13 @@ def detections_overlay(rgb: np.ndarray, detections, width: int) -> np.ndarray:
 
 
 class Panels:
-    def __init__(self, app: "OcslamApp") -> None:
+    """Every panel of one viser ``server`` (shared by all its clients); ``layers``: its scene layers
+    (the Layers tab toggles them); ``app``: what the panels' buttons ask for and what they show."""
+
+    def __init__(self, server: viser.ViserServer, layers: SceneLayers, app: GuiCommands) -> None:
         self.app = app
-        self.server = app.server
+        self.server = server
+        self.layers = layers
         gui = self.server.gui
         gui.configure_theme(control_width="medium", show_share_button=False, dark_mode=False)
         self.config_handles: dict[str, Any] = {}
@@ -131,8 +135,8 @@ class Panels:
         with gui.add_folder("Teleop (keys: i , j l u o m . k/space)"):
             for label, key in HOLD_BUTTONS:
                 b = gui.add_button(label, hint=f"hold to drive (key '{key}')", color="red" if key == "k" else None)
-                b.on_click(lambda ev, k=key: app.teleop.press(k))
-                b.on_hold(lambda ev, k=key: app.teleop.press(k), callback_hz=10.0)
+                b.on_click(lambda ev, k=key: app.teleop_key(k))
+                b.on_hold(lambda ev, k=key: app.teleop_key(k), callback_hz=10.0)
             self.speed_readout = gui.add_markdown("")
             self._config_control("ui.teleop_linear_mps", label="linear speed (m/s)")
             self._config_control("ui.teleop_angular_rps", label="turn rate (rad/s)")
@@ -170,7 +174,7 @@ class Panels:
         gui = self.server.gui
         for hotkey, key, what in HOTKEYS:
             cmd = gui.add_command(f"Teleop: {what}", description=f"key '{key}' (teleop_twist_keyboard)", hotkey=hotkey)  # type: ignore[arg-type]
-            cmd.on_trigger(lambda ev, k=key: self.app.teleop.press(k))
+            cmd.on_trigger(lambda ev, k=key: self.app.teleop_key(k))
 
     # ------------------------------------------------------------------------------------------
     # Tune: every live config field, bound to the same Config the CLI and YAML use
@@ -207,7 +211,7 @@ class Panels:
 
             coerce_value(path.split(".")[0], f, value)  # refuse now, with a notification
         except ConfigError as e:
-            _notify(getattr(event, "client", None), self.server, "Value refused", str(e))
+            notify_clients(getattr(event, "client", None), self.server, "Value refused", str(e))
             old = self.app.cfg.get(path)
             if handle.value != old:
                 handle.value = old if not isinstance(old, bool) else bool(old)
@@ -265,7 +269,7 @@ class Panels:
         )
         rows = []
         for o in objs[:60]:
-            T = self.app.layers._object_pose_map(o)
+            T = self.layers._object_pose_map(o)
             style = "" if o.presence >= thr else " style='opacity:0.45'"
             rows.append(
                 f"<tr{style}><td>{o.label}</td><td>{T.x:.2f}, {T.y:.2f}</td><td>{o.size_x:.2f}×{o.size_y:.2f}</td>"
@@ -319,7 +323,7 @@ class Panels:
         with gui.add_folder("Layers"):
             for key, label, visible in LAYERS:
                 h = gui.add_checkbox(label, visible)
-                h.on_update(lambda ev, k=key, hh=h: self.app.layers.set_visible(k, bool(hh.value)))
+                h.on_update(lambda ev, k=key, hh=h: self.layers.set_visible(k, bool(hh.value)))
                 self.layer_handles[key] = h
 
     # ------------------------------------------------------------------------------------------
@@ -416,7 +420,7 @@ class Panels:
             return
         self._last_hist = now
         prec = rec = ate = float("nan")
-        if app.layers.is_visible("truth"):
+        if self.layers.is_visible("truth"):
             try:
                 rep = p.object_report()
                 prec, rec = rep.precision_strict, rep.recall

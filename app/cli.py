@@ -110,7 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         known = (ConfigError, FileNotFoundError)
         try:
-            from app.worlds import WorldError
+            from app.world.types import WorldError
 
             known = known + (WorldError,)
         except ImportError:

@@ -258,7 +258,7 @@ class Pipeline:
         from app.ocslam.slam import Slam
         from app.sim.robot_model import RobotModel
         from app.sim_world import SimWorld
-        from app.worlds import load_world
+        from app.world.format import load_world
 
         self.cfg = cfg
         self.world = world if world is not None else load_world(resolve_path(cfg.sim.world))

@@ -77,8 +77,8 @@ from app.sim.renderer import (
     resolve_renderer,
 )
 from app.sim.robot_model import RobotModel
-from app.world_models import get_model
-from app.worlds import World
+from app.world.models.catalogue import get_model
+from app.world.types import World
 
 # the parts' public names stay importable from here (the simulator's one entry point)
 __all__ = [

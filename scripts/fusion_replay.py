@@ -61,7 +61,7 @@ def record(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     world = None
     if args.random_seed is not None:
-        from app.worlds import random_world
+        from app.world.generator import random_world
 
         world = random_world(int(args.random_seed))
     pipe = Pipeline(cfg, world=world)
@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     r = sub.add_parser("record")
     add_config_arguments(r)
     r.add_argument("--route", default=None)
-    r.add_argument("--random-seed", type=int, default=None, help="a random world (app.worlds.random_world) instead of --world")
+    r.add_argument("--random-seed", type=int, default=None, help="a random world (app.world.generator.random_world) instead of --world")
     r.add_argument("--duration", type=float, default=1500.0)
     r.add_argument("--out", required=True)
     q = sub.add_parser("replay")

@@ -14,7 +14,8 @@ from app.ocslam.detector import Detector
 from app.ocslam.messages import CLASS_INDEX
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld
-from app.worlds import load_world, random_world
+from app.world.format import load_world
+from app.world.generator import random_world
 
 W, H = 640, 480
 PER_WORLD = int(sys.argv[1]) if len(sys.argv) > 1 else 20

@@ -417,7 +417,7 @@ def test_confine_path_property(tmp_path_factory) -> None:
 # stalling other clients
 # ----------------------------------------------------------------------------------------------
 def _world_limits():
-    import app.worlds as w
+    import app.world.validation as w
 
     for name in ("MAX_OBJECTS", "LIMITS", "WORLD_LIMITS", "MAX_ENTITIES"):
         if hasattr(w, name):
@@ -428,7 +428,7 @@ def _world_limits():
 @pytest.mark.slow
 def test_over_limit_world_refused_without_stalling(app, env) -> None:
     if _world_limits() is None:
-        pytest.skip("app.worlds has no world limits yet (issue 12 item 9, engineer DATA)")
+        pytest.skip("app.world.validation has no world limits yet (issue 12 item 9, engineer DATA)")
     import yaml
 
     big = yaml.safe_load((ASSETS / "worlds" / "small.yaml").read_text())
@@ -473,7 +473,7 @@ def test_load_world_swaps_in_the_loop_and_one_at_a_time(app, env) -> None:
         assert app.pipeline is old  # refused: one load at a time
     finally:
         app._world_loading.release()
-    import app.worlds as worlds
+    import app.world.format as worlds
 
     real = worlds.load_world
 

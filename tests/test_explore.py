@@ -8,7 +8,8 @@ import pytest
 
 from app.commands.run import run_headless
 from app.config import Config
-from app.worlds import dump_world, random_world
+from app.world.format import dump_world
+from app.world.generator import random_world
 
 
 @pytest.mark.slow

@@ -138,7 +138,7 @@ def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
     from app.ocslam.se2 import Pose2
     from app.sim_world import SimWorld
     from app.training.labels import SilhouetteRenderer
-    from app.worlds import World, WorldObject
+    from app.world.types import World, WorldObject
 
     world = World(
         name="tiny",
@@ -185,7 +185,7 @@ def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:
     from app.ocslam.se2 import Pose2
     from app.sim_world import SimWorld
     from app.training.labels import SilhouetteRenderer
-    from app.worlds import World, WorldObject
+    from app.world.types import World, WorldObject
 
     world = World(name="person", objects=[WorldObject("person", "person", 1.0, 0.0, yaw=3.14)])
     W, H = 160, 120

@@ -18,7 +18,7 @@ from app.training.oracle import OracleDetector
 @pytest.fixture(scope="module")
 def scene():
     from app.sim_world import SimWorld
-    from app.worlds import World, WorldObject
+    from app.world.types import World, WorldObject
 
     world = World(
         name="tiny",

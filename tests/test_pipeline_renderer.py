@@ -81,7 +81,7 @@ def test_an_egl_world_refuses_renders_from_another_thread():
     ok, why = sim_world.probe_egl()
     if not ok:
         pytest.skip(f"EGL cannot load here: {why}")
-    from app.worlds import load_world
+    from app.world.format import load_world
 
     cfg = Config.load(None, ["camera.noise_std=0"])
     sim = sim_world.SimWorld(load_world(resolve_path("assets/worlds/small.yaml")), cfg, renderer="egl")

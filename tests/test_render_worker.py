@@ -9,7 +9,7 @@ from app.config import Config
 from app.ocslam.se2 import Pose2
 from app.sim.render_worker import CameraWorker
 from app.sim_world import SimWorld
-from app.worlds import load_world
+from app.world.format import load_world
 from app.config import resolve_path
 
 
@@ -42,7 +42,7 @@ def test_worker_frames_match_in_process_renders() -> None:
 def test_a_render_that_never_returns_is_retried_with_a_nudged_pose() -> None:
     """pybullet 3.2.7's TinyRenderer loops forever on this exact pose of random world 1003 (1 mm away it
     renders in 20 ms): the worker restarts and the frame still arrives."""
-    from app.worlds import random_world
+    from app.world.generator import random_world
 
     cfg = Config.load(None, ["camera.noise_std=0"])
     worker = CameraWorker(random_world(1003), cfg, seed=0, frame_timeout_s=8.0)
@@ -60,7 +60,7 @@ def test_worker_reports_its_renderer_and_falls_back_when_egl_fails(monkeypatch) 
     """The render process says what it renders with; with an EGL plugin that cannot load it renders with
     TinyRenderer and says why (the probe's verdict reaches the child through the environment)."""
     from app import sim_world
-    from app.worlds import random_world
+    from app.world.generator import random_world
 
     world = random_world(1001)
     cfg = Config.load(None, ["camera.noise_std=0", "sim.renderer=tiny"])

@@ -12,7 +12,8 @@ from app.config import Config
 from app.ocslam.messages import Twist
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld, pose3
-from app.worlds import Wall, World, WorldObject, load_world
+from app.world.format import load_world
+from app.world.types import Wall, World, WorldObject
 
 
 def box_room(half: float = 3.0, thickness: float = 0.2, objects: list[WorldObject] | None = None, start: Pose2 | None = None) -> World:
@@ -433,7 +434,7 @@ def test_egl_draws_each_scale_of_a_shared_mesh():
 def test_planar_lidar_agrees_with_pybullet_ray_tests(world_name):
     """The 2D cast against the collision shapes' cross-section at the LIDAR height (boxes, mesh hulls,
     cylinders, tilted parts) gives pybullet's 3D ray-test ranges: the same returns, within millimetres."""
-    from app.worlds import random_world
+    from app.world.generator import random_world
 
     world = load_world("assets/worlds/apartment.yaml") if world_name == "apartment" else random_world(1003)
     cfg = quiet_config(**{"lidar.noise_std_m": 0.0, "sim.renderer": "tiny"})

@@ -12,21 +12,12 @@ from shapely.geometry import Polygon
 from shapely.ops import unary_union
 
 from app.ocslam.messages import CLASS_NAMES
-from app.world_models import (
-    COLLISION_ONLY,
-    MESH_DIR,
-    MODELS,
-    build_model_pybullet,
-    get_model,
-    jitter_color,
-    model_footprint,
-    model_parts_trimesh,
-    model_trimesh,
-    model_z_range,
-    models_for_class,
-    parse_color,
-    world_visual_meshes,
-)
+from app.world.models.bodies import build_model_pybullet
+from app.world.models.catalogue import MODELS, get_model, models_for_class
+from app.world.models.colors import jitter_color, parse_color
+from app.world.models.geometry import model_footprint, model_z_range
+from app.world.models.meshes import model_parts_trimesh, model_trimesh, world_visual_meshes
+from app.world.models.parts import COLLISION_ONLY, MESH_DIR
 
 LIDAR_Z = 0.173
 
@@ -201,7 +192,7 @@ def test_trimesh_visuals_and_world_meshes():
     for name in MODELS:
         m = model_trimesh(name, color=(0.1, 0.9, 0.1))
         assert len(m.faces) > 0 and m.visual.face_colors.shape == (len(m.faces), 4)
-    from app.worlds import load_world
+    from app.world.format import load_world
 
     meshes = world_visual_meshes(load_world("assets/worlds/apartment.yaml"))
     names = [n for n, _ in meshes]

@@ -13,17 +13,10 @@ import yaml
 from app.cli import main as cli_main
 from app.config import Config
 from app.ocslam.messages import CLASS_NAMES
-from app.worlds import (
-    ROBOT_RADIUS_M,
-    WorldError,
-    class_counts,
-    dump_world,
-    load_world,
-    random_world,
-    validate_world,
-    world_from_dict,
-    world_to_dict,
-)
+from app.world.format import dump_world, load_world, world_from_dict, world_to_dict
+from app.world.generator import random_world
+from app.world.types import ROBOT_RADIUS_M, WorldError, class_counts
+from app.world.validation import validate_world
 
 APARTMENT = Path("assets/worlds/apartment.yaml")
 
@@ -211,7 +204,7 @@ def _big_world(n_objects: int, n_walls: int = 4) -> dict:
 def test_a_world_at_the_limits_validates_quickly(tmp_path):
     import time
 
-    from app.worlds import MAX_ENTITIES, MAX_WALLS
+    from app.world.validation import MAX_ENTITIES, MAX_WALLS
 
     p = tmp_path / "big.yaml"
     p.write_text(yaml.safe_dump(_big_world(MAX_ENTITIES, MAX_WALLS)))
@@ -242,7 +235,7 @@ def test_world_limits_are_checked_before_anything_heavy(tmp_path, mutate, messag
 
 
 def test_binary_and_huge_world_files_are_refused(tmp_path):
-    from app.worlds import MAX_FILE_BYTES
+    from app.world.validation import MAX_FILE_BYTES
 
     b = tmp_path / "bin.yaml"
     b.write_bytes(bytes(range(256)) * 4)
@@ -301,7 +294,7 @@ from hypothesis import strategies as st
 )
 def test_wall_pieces_and_openings_tile_the_wall(length, height, cuts):
     """Solid pieces plus openings cover the wall's face exactly once (area L·H), for any openings."""
-    from app.worlds import Opening, Wall
+    from app.world.types import Opening, Wall
 
     openings, s = [], 0.0
     for frac, width, bottom, top in cuts:

@@ -21,8 +21,11 @@ from app.ocslam.evaluation import (
 )
 from app.ocslam.messages import CLASS_NAMES, GroundTruthObject, TrackedObject
 from app.ocslam.se2 import Pose2
-from app.world_layouts import FAMILIES, generate, occluders_for, route_poses, tour_view_counts
-from app.worlds import ROBOT_RADIUS_M, ROUTE_MARGIN_M, dump_world, load_world, validate_world, world_to_dict
+from app.world.format import dump_world, load_world, world_to_dict
+from app.world.generator import FAMILIES, generate
+from app.world.tour import occluders_for, route_poses, tour_view_counts
+from app.world.types import ROBOT_RADIUS_M, ROUTE_MARGIN_M
+from app.world.validation import validate_world
 
 ROOT = Path(__file__).resolve().parents[1]
 ZOO_DIR = ROOT / "assets" / "worlds" / "zoo"
@@ -94,7 +97,7 @@ def test_route_poses_turn_in_place_then_drive():
 
 
 def test_walls_hide_objects_and_the_field_of_view_limits_them():
-    from app.worlds import Wall
+    from app.world.types import Wall
 
     square = lambda x, y, r=0.1: np.array([[x - r, y - r], [x + r, y - r], [x + r, y + r], [x - r, y + r]])  # noqa: E731
     fps = [square(2.0, 0.0), square(2.0, 0.0), square(0.0, 2.0), square(5.0, 0.0)]

@@ -8,7 +8,7 @@
 Suites (``--suite``): ``zoo-dev`` and ``zoo-test`` are the halves of the hand-written world zoo
 (``assets/worlds/zoo/split.yaml``, documented in ``assets/worlds/zoo/README.md``: tune on dev, only
 report test); ``random`` is ``--suite-worlds`` (10) worlds of the corridor, L-shaped and open-plan
-families (:mod:`app.world_layouts`), seeds ``--world-seed`` (99000) onwards, the family cycling with the
+families (:mod:`app.world.layouts`), seeds ``--world-seed`` (99000) onwards, the family cycling with the
 seed. Worlds run in ``--workers`` processes (2 by default); each world's run depends only on its world
 and the config (``sim.seed``), so a suite gives the same figures serial or parallel.
 
@@ -74,7 +74,7 @@ class _FrameLogger:
 
     def __init__(self, pipe: Any, max_range_m: float = 4.0) -> None:
         from app.ocslam.evaluation import ObservationLog
-        from app.world_layouts import occluders_for
+        from app.world.tour import occluders_for
 
         self.pipe = pipe
         self.truth = pipe.sim.ground_truth_objects()  # world frame, the order of truth_objects_map()
@@ -189,10 +189,10 @@ def suite_jobs(suite: str, *, n_random: int = 10, first_seed: int = 99000) -> li
 
 def _job_world(job: dict[str, Any]):
     if "file" in job:
-        from app.worlds import load_world
+        from app.world.format import load_world
 
         return load_world(job["file"])
-    from app.world_layouts import generate
+    from app.world.generator import generate
 
     return generate(job.get("family", "rooms"), int(job["seed"]))
 

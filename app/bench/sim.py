@@ -124,7 +124,7 @@ def measure(cfg, *, route: str | None, frames: int, scans: int, steps: int, max_
     from app.config import resolve_path
     from app.ocslam.messages import Twist
     from app.sim_world import SimWorld
-    from app.worlds import load_world
+    from app.world.format import load_world
 
     world = load_world(resolve_path(cfg.sim.world))
     route = route or cfg.sim.route

@@ -106,7 +106,7 @@ def run_headless(
     from app.config import resolve_path
     from app.pipeline import Pipeline
     from app.session import check_run_dir, save_session
-    from app.worlds import load_world
+    from app.world.format import load_world
 
     duration = check_duration(duration)
     out = check_run_dir(out or Path("runs") / time.strftime("run-%Y%m%d-%H%M%S"))

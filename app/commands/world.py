@@ -22,14 +22,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("--rooms", type=int, default=None, help="number of rooms (default: 3–5 at random)")
     r.add_argument("--family", choices=("rooms", "corridor", "lshape", "openplan"), default="rooms",
                    help="layout family: rooms (a rectangle split into rooms), corridor (+ offices), lshape (an L-shaped "
-                        "flat), openplan (app/world_layouts.py)")
+                        "flat), openplan (app/world/layouts.py)")
     v = sub.add_parser("validate", help="load and check a world file (exit 2 with the offending entry)")
     v.add_argument("file", type=Path, nargs="+")
     sub.add_parser("models", help="list the model catalogue (name, class, size, legged)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from app.worlds import WorldError, class_counts, dump_world, load_world, random_world
+    from app.world.format import dump_world, load_world
+    from app.world.generator import random_world
+    from app.world.types import WorldError, class_counts
 
     cmd = getattr(args, "world_command", None)
     if cmd == "random":
@@ -37,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
 
         check_out_file(args.out)  # before the (seconds-long) generation
         if getattr(args, "family", "rooms") != "rooms":
-            from app.world_layouts import generate
+            from app.world.generator import generate
 
             world = generate(args.family, args.seed)
         else:
@@ -70,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         return 2 if bad else 0
     if cmd == "models":
         from app.bench.common import table
-        from app.world_models import describe
+        from app.world.models.geometry import describe
 
         rows = [(r["model"], r["class"], "yes" if r["legged"] else "", " × ".join(f"{v:.2f}" for v in r["size_m"]), r["description"])
                 for r in describe()]

@@ -17,8 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.sim.robot_model import RobotModel
-from app.world_models import build_model_pybullet, get_model, resolve_colors
-from app.worlds import World
+from app.world.models.bodies import build_model_pybullet
+from app.world.models.catalogue import get_model
+from app.world.models.colors import resolve_colors
+from app.world.types import World
 
 __all__ = ["FAR_AWAY", "G_CHECK", "G_FLOOR", "G_ROBOT", "G_WORLD", "Bodies", "build_bodies"]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from app.ocslam.messages import GroundTruthObject, GroundTruthObstacle
-from app.worlds import World
+from app.world.types import World
 
 __all__ = ["ground_truth_objects", "ground_truth_obstacles"]
 

@@ -159,7 +159,8 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
     """Render ``task.images`` views of one world into ``opts.out``; returns the image records."""
     from app.config import Config, resolve_path
     from app.sim_world import SimWorld
-    from app.worlds import load_world, random_world
+    from app.world.format import load_world
+    from app.world.generator import random_world
 
     if progress is None and _progress_queue is not None:
         progress = _progress_queue.put

@@ -234,7 +234,7 @@ class SilhouetteRenderer:
     """Unoccluded, untruncated pixel areas of a world's objects, for any camera pose.
 
     One pybullet DIRECT client per object (created on first use, geometry from
-    ``app.world_models.build_model_pybullet`` exactly as the simulator builds it), so a render costs
+    ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it), so a render costs
     only that object's triangles and the window's pixels. Close it (or use it as a context manager)
     to free the clients.
     """
@@ -248,7 +248,7 @@ class SilhouetteRenderer:
         if oid not in self._clients:
             import pybullet as p
 
-            from app.world_models import build_model_pybullet
+            from app.world.models.bodies import build_model_pybullet
 
             o = self.world.objects[oid]
             cid = p.connect(p.DIRECT)

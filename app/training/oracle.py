@@ -33,7 +33,7 @@ __all__ = ["OracleDetector"]
 class OracleDetector:
     """Detections from ground-truth segmentation (see the module docstring).
 
-    ``world`` (the simulator's :class:`app.worlds.World`) enables the visible-fraction test; it may also
+    ``world`` (the simulator's :class:`app.world.types.World`) enables the visible-fraction test; it may also
     be assigned later (``oracle.world = sim.world``). Without it only the pixel-count test applies.
     """
 

@@ -180,7 +180,7 @@ class SceneLayers:
     def _build_world_meshes(self) -> None:
         """The simulator's walls and objects (in the world frame, under T_map_world)."""
         try:
-            from app.world_models import world_visual_meshes
+            from app.world.models.meshes import world_visual_meshes
 
             meshes = world_visual_meshes(self.pipeline.world)
         except Exception as e:

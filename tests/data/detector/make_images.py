@@ -12,7 +12,8 @@ from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld
-from app.worlds import load_world, random_world
+from app.world.format import load_world
+from app.world.generator import random_world
 
 out = Path(sys.argv[1]); out.mkdir(parents=True, exist_ok=True)
 W, H = 320, 240

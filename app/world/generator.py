@@ -11,11 +11,9 @@ Example:
 
 from __future__ import annotations
 
-import numpy as np
-
-from app.world.layouts import FAMILIES
+from app.world.layouts import FAMILIES, generate_family
 from app.world.rooms import rooms_world
-from app.world.types import World, WorldError
+from app.world.types import World
 
 __all__ = ["random_world", "generate", "FAMILIES"]
 
@@ -38,11 +36,4 @@ def generate(family: str, seed: int, attempts: int = 30) -> World:
     Deterministic for ``(family, seed)``; ``WorldError`` if no attempt gave a valid world."""
     if family == "rooms":
         return rooms_world(seed)
-    if family not in FAMILIES:
-        raise WorldError(f"unknown layout family {family!r} (families: rooms, {', '.join(FAMILIES)})")
-    rng = np.random.default_rng([seed, sorted(FAMILIES).index(family) + 1])
-    for _ in range(attempts):
-        w = FAMILIES[family](rng, seed)
-        if w is not None:
-            return w
-    raise WorldError(f"world random --family {family} --seed {seed}: no valid world in {attempts} attempts")
+    return generate_family(family, seed, attempts)

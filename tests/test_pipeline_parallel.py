@@ -11,7 +11,8 @@ import pytest
 
 from app.config import Config, resolve_path
 from app.ocslam.detector import Detector
-from app.pipeline import Pipeline, StageJobs
+from app.loop.stages import StageJobs
+from app.pipeline import Pipeline
 
 
 class LateDetector:

@@ -431,7 +431,7 @@ class OcslamApp:
             return tuple(f for f in sorted(target.glob("*"))[:50] if f.is_file()) if target.is_dir() else (target,)
 
         def apply(p: Any) -> None:
-            from app.session import load_session
+            from app.session_load import load_session
 
             load_session(p, target)
             self.layers._grid_stamp = -1.0

@@ -276,7 +276,7 @@ def test_corrupt_session_is_a_clear_error_in_every_export(scratch, capsys, case,
 def test_corrupt_session_is_refused_by_load_and_the_map_keeps_running(scratch, case):
     """Item 7: a NaN keyframe pose was reported as "Session loaded", then every tick failed."""
     from app.pipeline import Pipeline
-    from app.session import load_session
+    from app.session_load import load_session
 
     _, corrupt, message = case
     corrupt(scratch / "runs" / "old")
@@ -294,7 +294,7 @@ def test_corrupt_session_is_refused_by_load_and_the_map_keeps_running(scratch, c
 
 def test_session_of_another_world_is_refused(scratch, base_run):
     from app.pipeline import Pipeline
-    from app.session import load_session
+    from app.session_load import load_session
 
     pipe = Pipeline(Config.load(None, ["detector.kind=none"]))  # the apartment
     try:

@@ -9,7 +9,8 @@ import pytest
 
 from app.config import ASSETS, Config
 from app.pipeline import Pipeline
-from app.session import SessionError, load_session, pack_state, save_session, summary_json, unpack_state, write_run_dir
+from app.session import SessionError, pack_state, save_session, summary_json, unpack_state, write_run_dir
+from app.session_load import load_session
 
 DETECTOR = "yolo" if (ASSETS / "models" / "detector.onnx").is_file() else "oracle"
 

@@ -60,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
         check_duration(args.duration)
         return run_headless(config_from_args(args), route=args.route, explore=args.explore, duration=args.duration,
                             out=args.out)
-    from app.session import check_out_file, read_session
+    from app.session import check_out_file
+    from app.session_load import read_session
 
     session: Path = args.session
     data = read_session(session).check()  # SessionError for a missing/corrupt session or a missing config.yaml
@@ -101,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     if what == "recording":
         from app.config import atomic_write_bytes
         from app.pipeline import Pipeline
-        from app.session import load_session, recording_bytes, recording_html
+        from app.session import recording_bytes, recording_html
+        from app.session_load import load_session
 
         out = check_out_file(args.out)
         html = out.with_suffix(".html")

@@ -1,0 +1,74 @@
+"""Where the soak's RSS goes at a world change: one pipeline per world (YOLO on, frontier exploration for
+``--sim`` sim seconds), then after each world's close: this process's RSS, the same after ``malloc_trim(0)``
+(``--trim``), the Python objects by type that grew (``gc.get_objects()``), threads, open files and memory
+mappings, and with ``--trace`` the memory tracemalloc sees and its top growth (slow: several times the run).
+One JSON line per world (docs/benchmarks.md, "Why the RSS steps up at a world change").
+
+    python scripts/soak_memory.py [--worlds 8] [--sim 20] [--same] [--trim] [--trace]
+    MALLOC_ARENA_MAX=2 python scripts/soak_memory.py ...           # fewer glibc arenas
+    MALLOC_MMAP_THRESHOLD_=131072 python scripts/soak_memory.py ... # glibc's mmap threshold fixed (not dynamic)
+"""
+import argparse
+import collections
+import gc
+import json
+import os
+import threading
+import time
+import tracemalloc
+
+from app.bench.soak import malloc_trim, rss_mib
+from app.config import Config
+from app.pipeline import Pipeline
+from app.world.generator import random_world
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--worlds", type=int, default=8)
+    ap.add_argument("--sim", type=float, default=20.0, help="sim seconds per world")
+    ap.add_argument("--seed0", type=int, default=99100)
+    ap.add_argument("--same", action="store_true", help="the same world every time")
+    ap.add_argument("--trim", action="store_true", help="malloc_trim(0) after every world, and its RSS")
+    ap.add_argument("--trace", action="store_true", help="tracemalloc (slow)")
+    a = ap.parse_args()
+    cfg = Config.load(None, ["detector.kind=yolo"])
+
+    def types() -> collections.Counter:
+        return collections.Counter(type(o).__name__ for o in gc.get_objects())
+
+    if a.trace:
+        tracemalloc.start(3)
+    prev_snap, prev_types = None, types()
+    print(json.dumps({"start_rss_mib": round(rss_mib(children=False), 1)}), flush=True)
+    for i in range(a.worlds):
+        seed = a.seed0 + (0 if a.same else i)
+        t0 = time.perf_counter()
+        pipe = Pipeline(cfg, world=random_world(seed))
+        pipe.explore()
+        while pipe.time < a.sim and not (pipe.drive_mode == "idle" and pipe.nav_status):
+            pipe.step()
+        live = rss_mib(children=False)
+        pipe.close()
+        del pipe
+        gc.collect()
+        rec = {"world": i, "seed": seed, "wall_s": round(time.perf_counter() - t0, 1), "rss_live_mib": round(live, 1),
+               "rss_closed_mib": round(rss_mib(children=False), 1), "threads": threading.active_count(),
+               "fds": len(os.listdir("/proc/self/fd")), "maps": sum(1 for _ in open("/proc/self/maps"))}
+        if a.trim and malloc_trim():
+            rec["rss_trimmed_mib"] = round(rss_mib(children=False), 1)
+        if a.trace:
+            rec["traced_mib"] = round(tracemalloc.get_traced_memory()[0] / 2**20, 1)
+            snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])
+            if prev_snap is not None:
+                rec["traced_growth"] = [f"{st.size_diff / 1024:+.0f} KiB {st.traceback[0].filename}:{st.traceback[0].lineno}"
+                                        for st in snap.compare_to(prev_snap, "lineno")[:6]]
+            prev_snap = snap
+        t = types()
+        rec["objects_grown"] = (t - prev_types).most_common(6)
+        prev_types = t
+        print(json.dumps(rec), flush=True)
+
+
+if __name__ == "__main__":  # the render worker is a spawned process: it imports this module
+    main()

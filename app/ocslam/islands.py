@@ -17,8 +17,6 @@ from functools import cached_property
 import numpy as np
 import shapely
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from shapely.geometry import MultiPoint, Polygon
 
@@ -82,6 +80,35 @@ class Island:
         return len(self.points)
 
 
+def components(n: int, i: NDArray[np.int64], j: NDArray[np.int64]) -> tuple[int, NDArray[np.int64]]:
+    """Connected components of the undirected graph on ``n`` nodes with edges ``(i[e], j[e])``.
+
+    Returns ``(C, labels)``, ``labels`` ``(n,)`` numbered ``0..C-1`` in the order of each component's
+    lowest node (the numbering of ``scipy.sparse.csgraph.connected_components``). Union-find by
+    hooking roots to the lower root and pointer jumping, in numpy: a few vector passes instead of
+    scipy's sparse-matrix construction and validation, which cost more than the search itself on the
+    small graphs here (a scan's few hundred points).
+    """
+    parent = np.arange(n, dtype=np.int64)
+    i = np.asarray(i, dtype=np.int64).reshape(-1)
+    j = np.asarray(j, dtype=np.int64).reshape(-1)
+    while len(i):
+        ri, rj = parent[i], parent[j]
+        differ = ri != rj
+        if not np.any(differ):
+            break
+        ri, rj = ri[differ], rj[differ]
+        i, j = i[differ], j[differ]
+        np.minimum.at(parent, np.maximum(ri, rj), np.minimum(ri, rj))
+        while True:  # pointer jumping: every node points at its root
+            nxt = parent[parent]
+            if np.array_equal(nxt, parent):
+                break
+            parent = nxt
+    roots, labels = np.unique(parent, return_inverse=True)
+    return len(roots), labels.reshape(-1).astype(np.int64)
+
+
 def cluster_extents(
     points: FloatArray,
     gap_m: float,
@@ -118,8 +145,7 @@ def cluster_extents(
         ok = adjacent & (dist <= np.maximum(dmax, gap_m))
         pairs.append(np.stack([np.arange(n)[ok], nxt[ok]], axis=1))
     edges = np.vstack([p for p in pairs if len(p)]) if any(len(p) for p in pairs) else np.zeros((0, 2), dtype=np.int64)
-    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    _, labels = components(n, edges[:, 0], edges[:, 1])
     lo = np.full((labels.max() + 1, 2), np.inf)
     hi = np.full((labels.max() + 1, 2), -np.inf)
     np.minimum.at(lo, labels, pts)
@@ -140,8 +166,7 @@ def islands_linkage(points: FloatArray, indices: NDArray[np.int64], gap_m: float
     if n == 1:
         return [Island(pts.copy(), idx.copy(), buffer_m=gap_m / 2.0)]
     pairs = cKDTree(pts).query_pairs(r=gap_m, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else coo_matrix((n, n))
-    n_comp, labels = connected_components(graph, directed=False)
+    n_comp, labels = components(n, pairs[:, 0], pairs[:, 1])
     out = []
     for c in range(n_comp):
         m = labels == c

@@ -354,7 +354,7 @@ def _try_rooms_world(rng: np.random.Generator, seed: int, n_rooms: int | None, e
     return world
 
 
-def _room_viewpoints(planner: "Planner", room: Room, cur: tuple[float, float]) -> list[tuple[float, float]]:
+def _room_viewpoints(planner: Planner, room: Room, cur: tuple[float, float]) -> list[tuple[float, float]]:
     """Where to drive in a room so the camera sweeps it: a loop ~0.8 m inside its walls (a line along
     a narrow room, its centre for a small one), starting nearest ``cur``."""
     inset = 0.8

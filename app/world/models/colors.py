@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import colorsys
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

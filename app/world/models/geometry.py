@@ -7,8 +7,8 @@ Example:
 
 from __future__ import annotations
 
-from functools import lru_cache
-from typing import Iterable
+from collections.abc import Iterable
+from functools import cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,7 +19,7 @@ from app.world.models.meshes import part_trimesh
 __all__ = ["model_footprint", "model_z_range", "describe"]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _footprint_and_z(name: str) -> tuple[NDArray[np.float64], float, float]:
     from shapely import MultiPoint
 

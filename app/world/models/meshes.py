@@ -8,9 +8,9 @@ Example:
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from collections.abc import Sequence
+from functools import cache
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +31,7 @@ def mesh_path(ref: str) -> Path:
     return MESH_DIR / ref
 
 
-@lru_cache(maxsize=None)
+@cache
 def _load_mesh(ref: str):
     import trimesh
 

@@ -91,7 +91,7 @@ def _open(path: Path):
         return bz2.open(path, "rt", errors="replace")
     if path.suffix == ".gz":
         return gzip.open(path, "rt", errors="replace")
-    return open(path, "rt", errors="replace")
+    return open(path, errors="replace")
 
 
 _MAX_PARAMS = ("robot_front_laser_max", "laser_front_laser_max", "robot_frontlaser_max")

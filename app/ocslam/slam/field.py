@@ -35,7 +35,7 @@ class MatchField:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.score.shape  # type: ignore[return-value]
+        return (int(self.score.shape[0]), int(self.score.shape[1]))
 
     def to_cells(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(N, 2)`` points in ``F`` → continuous ``(u_x, u_y)`` cell coordinates."""
@@ -50,7 +50,7 @@ class MatchField:
             k = 2**h
             # anchor (0, 0): dst(i, j) = max over src[i : i+k, j : j+k]
             pooled = cv2.dilate(self.score, np.ones((k, k), np.uint8), anchor=(0, 0), borderType=cv2.BORDER_CONSTANT, borderValue=0)
-            self.pyramid.append(pooled)
+            self.pyramid.append(np.asarray(pooled, np.float32))
 
 
 def build_field(
@@ -118,9 +118,9 @@ def build_field(
     linearity = np.where(lmax > 1e-12, 1.0 - np.maximum(lmin, 0.0) / np.maximum(lmax, 1e-12), 0.0)
     linearity = np.where(N >= 3, linearity, 0.0)
 
-    mask = np.full(n, 255, np.uint8)
-    mask[cells] = 0
-    mask = mask.reshape(H, W)
+    flat = np.full(n, 255, np.uint8)
+    flat[cells] = 0
+    mask = flat.reshape(H, W)
     dist, labels = cv2.distanceTransformWithLabels(mask, cv2.DIST_L2, cv2.DIST_MASK_5, labelType=cv2.DIST_LABEL_PIXEL)
     # labels number the zero pixels; map each label to the index of its occupied cell
     lab_of_cell = labels.reshape(-1)[cells]

@@ -46,7 +46,7 @@ class LogOddsGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.log_odds.shape  # type: ignore[return-value]
+        return (int(self.log_odds.shape[0]), int(self.log_odds.shape[1]))
 
     def to_cells(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(N, 2)`` map points → continuous cell coordinates ``(N, 2)`` as ``(u_x, u_y)``."""

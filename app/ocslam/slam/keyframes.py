@@ -32,7 +32,7 @@ class Growable:
         return self.n
 
     @staticmethod
-    def from_array(a: NDArray) -> "Growable":
+    def from_array(a: NDArray) -> Growable:
         a = np.asarray(a)
         g = Growable(a.shape[1:], a.dtype, max(256, len(a)))
         g._a[: len(a)] = a

@@ -106,8 +106,8 @@ def correlative_search(
     res, w, yaws, rows, cols, A, top = lattice
     step = 2**top
     offs = np.arange(-w, w + 1, step)
-    a, ox, oy = np.meshgrid(np.arange(A), offs, offs, indexing="ij")
-    a, ox, oy = a.ravel(), ox.ravel(), oy.ravel()
+    ga, gx, gy = np.meshgrid(np.arange(A), offs, offs, indexing="ij")
+    a, ox, oy = ga.ravel(), gx.ravel(), gy.ravel()
 
     def children(a, ox, oy, h):
         """Candidates of level h-1 inside the window covered by level-h candidates."""
@@ -204,8 +204,8 @@ def competitor(
 
     step = 2**top
     offs = np.arange(-w, w + 1, step)
-    a, ox, oy = np.meshgrid(np.arange(A), offs, offs, indexing="ij")
-    a, ox, oy = a.ravel(), ox.ravel(), oy.ravel()
+    ga, gx, gy = np.meshgrid(np.arange(A), offs, offs, indexing="ij")
+    a, ox, oy = ga.ravel(), gx.ravel(), gy.ravel()
     keep = outside(ox, oy, top)
     a, ox, oy = a[keep], ox[keep], oy[keep]
     h = top
@@ -241,6 +241,11 @@ def competitor(
         if h == 0:
             ok = sc >= min_score
             return found(a[ok], ox[ok], oy[ok], sc[ok]) if ok.any() else None
+
+
+def line_hessian(r: RefineResult) -> NDArray[np.float64]:
+    """``(3, 3)`` information of the point-to-line rows of a refinement (the full Hessian if it has none)."""
+    return r.hessian_line if r.hessian_line is not None else r.hessian
 
 
 def score_pose(fld: MatchField, pts: NDArray[np.float64], pose: NDArray[np.float64]) -> float:

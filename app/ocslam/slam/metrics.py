@@ -34,7 +34,7 @@ class Relations:
 def read_relations(path: str | Path) -> Relations:
     """Read a ``.relations`` file (``t1 t2 x y z roll pitch yaw`` per line; malformed lines are skipped)."""
     rows = []
-    with open(path, "rt") as fh:
+    with open(path) as fh:
         for line in fh:
             tok = line.split()
             if len(tok) < 8 or tok[0].startswith("#"):

@@ -57,7 +57,7 @@ class Candidate:
 
 def _safe_inv(info: NDArray[np.float64]) -> NDArray[np.float64]:
     try:
-        return np.linalg.inv(info + 1e-12 * np.eye(3))
+        return np.asarray(np.linalg.inv(info + 1e-12 * np.eye(3)), np.float64)
     except np.linalg.LinAlgError:
         return np.eye(3) * 1e6
 

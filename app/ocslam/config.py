@@ -244,6 +244,9 @@ class SlamConfig:
         0.5, min=0.0, max=100.0, unit="m", help="a loop group correcting more than this needs two submaps to agree"
     )
     loop_big_correction_rad: float = param(0.05, min=0.0, max=3.15, unit="rad", help="same, in heading")
+    loop_max_contradiction: float = param(
+        0.15, min=0.0, max=1.01, help="a loop whose aligned query has more of its points in the submap's free space, or rays through its walls, is rejected (>1: off)"
+    )
     optimize_every_keyframes: int = param(10, min=1, max=1000, help="optimise at most this often while loops arrive")
     optimize_iterations: int = param(5, min=1, max=100, help="Levenberg–Marquardt iterations per online optimisation")
     map_update_budget: int = param(50, min=1, max=100000, help="keyframes re-inserted into the grid per map update")

@@ -32,9 +32,10 @@ from numpy.typing import NDArray
 from app.ocslam.config import SlamConfig
 from app.ocslam.se2 import between, transform_points, wrap_angle
 from app.ocslam.slam.field import MatchField, build_field
+from app.ocslam.slam.freespace import Contradiction, FreeSpace, build_free_space, contradiction, overlap_rival
 from app.ocslam.slam.information import scan_information, strip_direction
 from app.ocslam.slam.keyframes import Keyframes
-from app.ocslam.slam.matcher import competitor, correlative_search, refine
+from app.ocslam.slam.matcher import competitor, correlative_search, line_hessian, refine
 
 
 @dataclass
@@ -45,6 +46,7 @@ class LoopClosure:
     score: float
     inlier_fraction: float
     info: NDArray[np.float64] | None = None  # (3, 3) information of the match in the keyframe's frame
+    contradiction: Contradiction | None = None  # the aligned query against the submap's free space
 
 
 @dataclass
@@ -53,6 +55,7 @@ class _Submap:
     last: int  # exclusive
     rel: NDArray[np.float64]  # (n, 3) T_anchor_kf used to build the field
     field: MatchField | None
+    free: FreeSpace | None = None  # built on the first candidate against this submap (see .freespace)
 
 
 def voxel_downsample(points: NDArray[np.float64], voxel: float) -> NDArray[np.float64]:
@@ -75,6 +78,7 @@ class LoopCloser:
         self.searches = 0
         self.accepted = 0
         self.ambiguous = 0  # candidates with a competitor (information stripped along it)
+        self.ambiguous_overlap = 0  # candidates stripped by the overlap-normalised test (.freespace.overlap_rival)
         self.travel_since_loop = 0.0  # m travelled since the last accepted loop closure
         self.log: list[tuple] = []
 
@@ -111,6 +115,12 @@ class LoopCloser:
         sm = _Submap(first, last, rel, fld)
         self.submaps[s] = sm
         return sm
+
+    def free_space(self, kfs: Keyframes, sm: _Submap) -> FreeSpace | None:
+        """The submap's :class:`~.freespace.FreeSpace` (built once per field, lazily)."""
+        if sm.free is None:
+            sm.free = build_free_space(sm.rel, kfs.scans[sm.first : sm.last], max_range_m=1.5 * self.cfg.loop_query_range_m)
+        return sm.free
 
     def query_cloud(self, kfs: Keyframes, k: int) -> NDArray[np.float64]:
         """``(Q, 2)`` points of keyframe ``k`` and its predecessors in ``k``'s frame, downsampled."""
@@ -189,8 +199,13 @@ class LoopCloser:
             if constraint < cfg.loop_min_constraint:
                 continue
             self.accepted += 1
+            fs = self.free_space(kfs, sm)
+            contra = None
+            if fs is not None:
+                q = kfs.scans[k]
+                contra = contradiction(fs, ref.pose, query, q.sensor, q.ends, q.hit, max_range_m=1.5 * cfg.loop_query_range_m)
             info = scan_information(
-                ref.hessian_line, float(ref.pose[2]), cfg.match_info_point_sigma_m, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor
+                line_hessian(ref), float(ref.pose[2]), cfg.match_info_point_sigma_m, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor
             )
             if cfg.loop_ambiguity_ratio <= 1.0:
                 rival = competitor(
@@ -204,7 +219,20 @@ class LoopCloser:
                     c, s_ = np.cos(ref.pose[2]), np.sin(ref.pose[2])
                     d_body = np.array([c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]])
                     info = strip_direction(info, d_body, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor)
-            out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction, info))
+            if fs is not None and cfg.loop_ambiguity_ratio <= 1.0:
+                # the same test with the overlap-normalised score: along a featureless stretch a pose
+                # that moves more of the query into the submap's coverage outscores the true one in
+                # the correlative score, not here
+                alt, s_best, s_alt = overlap_rival(
+                    sm.field, fs, query, ref.pose, info, win_xy, cfg.loop_ambiguity_m, cfg.loop_ambiguity_ratio, kfs.scans[k], 1.5 * cfg.loop_query_range_m
+                )
+                if alt is not None:
+                    self.ambiguous_overlap += 1
+                    d = alt[:2] - ref.pose[:2]
+                    c, s_ = np.cos(ref.pose[2]), np.sin(ref.pose[2])
+                    d_body = np.array([c * d[0] + s_ * d[1], -s_ * d[0] + c * d[1]])
+                    info = strip_direction(info, d_body, cfg.loop_sigma_xy_m, cfg.loop_sigma_yaw_rad, cfg.match_info_floor)
+            out.append(LoopClosure(sm.first, k, ref.pose, res.score, ref.inlier_fraction, info, contra))
         return out
 
     def forget(self) -> None:

@@ -32,11 +32,11 @@ from app.ocslam.messages import LaserScan, OccupancyGrid
 from app.ocslam.se2 import Pose2, between, compose, interpolate, transform_points, wrap_angle
 from app.ocslam.slam.field import MatchField, build_field
 from app.ocslam.slam.graph import PoseGraph, as_full_info, edge_chi2, edge_errors, optimize
-from app.ocslam.slam.information import odometry_information, scan_information
 from app.ocslam.slam.grid import LogOddsGrid
+from app.ocslam.slam.information import odometry_information, scan_information
 from app.ocslam.slam.keyframes import Growable, Keyframes, KeyframeScan, Trajectory
 from app.ocslam.slam.loop import LoopCloser
-from app.ocslam.slam.matcher import correlative_search, refine
+from app.ocslam.slam.matcher import RefineResult, correlative_search, line_hessian, refine
 from app.ocslam.slam.verify import Candidate, LoopVerifier
 
 
@@ -127,7 +127,7 @@ class Slam:
         self._beams = len(scan.ranges)
         self._last_stamp = float(scan.stamp)
         cfg = self.cfg
-        if self._last_pose is None:
+        if self._last_pose is None or self._last_odom is None:
             pred = odom.copy()  # map = odom at start
         else:
             pred = compose(self._last_pose, between(self._last_odom, odom))
@@ -172,19 +172,17 @@ class Slam:
         if fld is None:
             return pred
         prior_info = np.array([1 / cfg.prior_sigma_xy_m**2, 1 / cfg.prior_sigma_xy_m**2, 1 / cfg.prior_sigma_yaw_rad**2])
-        kw = dict(
-            prior=pred,
-            prior_info=prior_info,
-            max_dist_m=4 * cfg.match_resolution_m,
-            robust_m=cfg.match_robust_m,
-            point_weight=cfg.match_point_weight,
-        )
+
+        def refine_from(init: NDArray[np.float64]) -> RefineResult:
+            return refine(fld, pts, init, prior=pred, prior_info=prior_info, max_dist_m=4 * cfg.match_resolution_m,
+                          robust_m=cfg.match_robust_m, point_weight=cfg.match_point_weight)
+
         direct = None
         if cfg.match_direct_min_inliers < 1.0:
-            direct = refine(fld, pts, pred, **kw)
+            direct = refine_from(pred)
             if direct.inlier_fraction >= cfg.match_direct_min_inliers:
                 self.stats["match_direct"] += 1
-                self._match_H = (direct.hessian_line, float(direct.pose[2]))
+                self._match_H = (line_hessian(direct), float(direct.pose[2]))
                 return direct.pose
         res = correlative_search(
             fld, pts, pred, cfg.match_search_xy_m, cfg.match_search_yaw_rad, cfg.match_yaw_step_rad, cfg.match_min_score
@@ -192,14 +190,14 @@ class Slam:
         if res is None:
             self.stats["match_failed"] += 1
             if direct is not None and direct.inlier_fraction > 0:
-                self._match_H = (direct.hessian_line, float(direct.pose[2]))
+                self._match_H = (line_hessian(direct), float(direct.pose[2]))
                 return direct.pose
             return pred
-        ref = refine(fld, pts, res.pose, **kw)
+        ref = refine_from(res.pose)
         self.stats["match_searched"] += 1
         if direct is not None and direct.inlier_fraction > ref.inlier_fraction:
             ref = direct
-        self._match_H = (ref.hessian_line, float(ref.pose[2]))
+        self._match_H = (line_hessian(ref), float(ref.pose[2]))
         return ref.pose
 
     def _local_field(self) -> MatchField | None:
@@ -273,8 +271,14 @@ class Slam:
             poses = self.keyframes.poses.data
             for lc in self.loops.search(self.keyframes, k):
                 info = lc.info if lc.info is not None else np.diag([1 / cfg.loop_sigma_xy_m**2, 1 / cfg.loop_sigma_xy_m**2, 1 / cfg.loop_sigma_yaw_rad**2])
+                cand = Candidate(lc.anchor, lc.keyframe, lc.measurement, info, lc.score)
+                if lc.contradiction is not None and lc.contradiction.worst > cfg.loop_max_contradiction:
+                    # the aligned query puts walls where the submap saw free space (or sees through its
+                    # walls): a place that only looks like the old one locally
+                    self.verifier.reject(cand, "free_space")
+                    continue
                 ij, z, inf, _ = self._active_edges()
-                for c in self.verifier.offer(Candidate(lc.anchor, lc.keyframe, lc.measurement, info, lc.score), poses, ij, z, inf):
+                for c in self.verifier.offer(cand, poses, ij, z, inf):
                     self._add_edge(c.anchor, c.keyframe, c.z, c.info, True)
                     self._pending_loops += 1
                     self.loops.travel_since_loop = 0.0
@@ -331,7 +335,7 @@ class Slam:
     @property
     def T_map_odom(self) -> Pose2:
         """The ``map → odom`` correction (identity until the estimate departs from odometry)."""
-        if self._last_pose is None:
+        if self._last_pose is None or self._last_odom is None:
             return Pose2()
         return Pose2.from_array(compose(self._last_pose, between(self._last_odom, np.zeros(3))))
 
@@ -471,7 +475,7 @@ class Slam:
         }
 
     @classmethod
-    def from_state_dict(cls, cfg: SlamConfig, d: dict) -> "Slam":
+    def from_state_dict(cls, cfg: SlamConfig, d: dict) -> Slam:
         """Rebuild a :class:`Slam` from :meth:`state_dict` output; mapping continues where it stopped."""
         s = cls(cfg, Pose2.from_array(d["T_base_scan"]))
         npts = np.asarray(d["kf_npoints"], np.int64)

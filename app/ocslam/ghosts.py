@@ -7,7 +7,7 @@ front of it. An object decays only once its clear misses outnumber its detection
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +38,8 @@ def decay_tracks(
 ) -> list[Track]:
     """Ghost decay; returns the tracks that remain (presence > 0)."""
     T_scan_map = T_map_scan.inverse()
+    T_base_map = T_map_base.inverse()
+    labels = {a.label for a in areas}
     keep = []
     for t in tracks:
         fp = t.footprint
@@ -45,13 +47,13 @@ def decay_tracks(
             keep.append(t)
             continue
         # explained by a box of its class whose wedge holds it
-        c_scan = T_scan_map.transform_points(fp.center[None, :])
-        b, _r = cam.bearing_ranges_scan(c_scan)
-        explained = any(a.label == t.label and bool(a.contains_bearing(b, margin=0.05)[0]) for a in areas)
-        if explained:
-            keep.append(t)
-            continue
-        if not in_camera_view(fp, t.prior.height[1], T_map_base, cam, float(cfg.decay_max_range_m)):
+        if t.label in labels:
+            c_scan = T_scan_map.transform_points(fp.center[None, :])
+            b, _r = cam.bearing_ranges_scan(c_scan)
+            if any(a.label == t.label and bool(a.contains_bearing(b, margin=0.05)[0]) for a in areas):
+                keep.append(t)
+                continue
+        if not in_camera_view(fp, t.prior.height[1], T_map_base, cam, float(cfg.decay_max_range_m), T_base_frame=T_base_map):
             keep.append(t)
             continue
         if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, float(cfg.occlusion_margin_m)):

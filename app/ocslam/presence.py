@@ -46,10 +46,13 @@ def in_camera_view(
     camera: CameraModel,
     max_range_m: float,
     margin_frac: float = 0.08,
+    T_base_frame: Pose2 | None = None,
 ) -> bool:
     """True if the object's centre (at mid-height, capped at 1 m) projects inside the image's inner part
-    and lies within ``max_range_m`` of the camera (horizontally)."""
-    c_base = T_frame_base.inverse().transform_points(footprint.center[None, :])[0]
+    and lies within ``max_range_m`` of the camera (horizontally). ``T_base_frame``: ``T_frame_base``'s
+    inverse when the caller has it (one per frame, not one per object)."""
+    T_bf = T_frame_base.inverse() if T_base_frame is None else T_base_frame
+    c_base = T_bf.transform_points(footprint.center[None, :])[0]
     z = float(np.clip(0.5 * height_m, 0.02, 1.0))
     uv, depth = camera.project(np.array([[c_base[0], c_base[1], z]]))
     if not depth[0] > 0.05:

@@ -81,7 +81,7 @@ def _hull_angles(p: FloatArray) -> FloatArray:
     hull = cv2.convexHull(p.astype(np.float32)).reshape(-1, 2).astype(np.float64)
     if len(hull) < 2:
         return np.array([0.0])
-    e = np.roll(hull, -1, axis=0) - hull
+    e = np.concatenate([hull[1:], hull[:1]]) - hull  # each edge (np.roll's result, without its overhead)
     e = e[np.hypot(e[:, 0], e[:, 1]) > 1e-6]
     if len(e) == 0:
         return np.array([0.0])

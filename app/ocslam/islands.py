@@ -102,7 +102,7 @@ def components(n: int, i: NDArray[np.int64], j: NDArray[np.int64]) -> tuple[int,
         np.minimum.at(parent, np.maximum(ri, rj), np.minimum(ri, rj))
         while True:  # pointer jumping: every node points at its root
             nxt = parent[parent]
-            if np.array_equal(nxt, parent):
+            if not (nxt != parent).any():
                 break
             parent = nxt
     roots, labels = np.unique(parent, return_inverse=True)

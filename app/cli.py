@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train-detector": ("app.commands.train_detector", "train the YOLO detector (needs the [train] extra)"),
     "export": ("app.commands.export", "export maps, objects and sessions"),
     "replay": ("app.commands.replay", "replay a ROS 1 / rosbag2 bag through the core (--headless, --reuse-detections)"),
+    "sweep": ("app.commands.sweep", "tuning sweep over a suite of worlds on Ray Tune (needs the [scale] extra)"),
 }
 
 BENCHES: dict[str, tuple[str, str]] = {

@@ -50,9 +50,16 @@ def browser_page(url: str, *, pages: int = 1) -> Iterator[list]:
             browser.close()
 
 
+ACTION_TIMEOUT_MS = 120_000
+
+
 def open_page(context, url: str):
-    """A new page of ``context`` on ``url``, once viser's canvas is there."""
+    """A new page of ``context`` on ``url``, once viser's canvas is there.
+
+    Actions get 120 s, not Playwright's 30 s: software WebGL on CI's two cores, shared with the app's
+    loop, can draw under one frame a second, and each click waits for a few frames (actionability)."""
     page = context.new_page()
+    page.set_default_timeout(ACTION_TIMEOUT_MS)
     page.goto(url, wait_until="domcontentloaded")
     page.wait_for_selector("canvas", timeout=60_000)
     return page

@@ -28,7 +28,9 @@ DETECTOR = "yolo" if (ASSETS / "models" / "detector.onnx").is_file() else "oracl
 @pytest.fixture(scope="module")
 def app(tmp_path_factory):
     runs = tmp_path_factory.mktemp("runs")  # GUI paths are confined to server.runs_dir (docs/security.md)
-    cfg = Config.load(None, [f"detector.kind={DETECTOR}", "server.port=0", "sim.speed=2", f"server.runs_dir={runs}"])
+    # real time and 5 Hz scene updates: the browser renders in software on the same two cores
+    over = [f"detector.kind={DETECTOR}", "server.port=0", "sim.speed=1", "ui.update_hz=5", f"server.runs_dir={runs}"]
+    cfg = Config.load(None, over)
     a = OcslamApp(cfg).start()
     a.submit(lambda p: p.follow_route("tour"))
     try:

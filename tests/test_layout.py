@@ -160,10 +160,15 @@ def test_the_core_imports_neither_the_simulator_nor_the_ui(forbidden: str) -> No
 
 
 def _readme_layout_paths() -> list[str]:
-    """The ``app/...`` paths in the first column of README's layout table."""
+    """The ``app/...`` paths in the first column of README's layout table (one or more per row)."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     section = text.split("## Layout", 1)[1].split("\n## ", 1)[0]
-    return [m.group(1).rstrip("/") for m in re.finditer(r"^\|\s*`(app/[^`]*)`", section, flags=re.MULTILINE)]
+    paths = []
+    for line in section.splitlines():
+        if line.startswith("|"):
+            first_cell = line.split("|")[1]
+            paths += [p.rstrip("/") for p in re.findall(r"`(app/[^`]*)`", first_cell)]
+    return paths
 
 
 def test_readme_layout_table_matches_the_tree() -> None:

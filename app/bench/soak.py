@@ -1,6 +1,6 @@
 """``ocslam bench soak``: the headless loop for hours of sim time, exploring random worlds with YOLO on.
 
-    ocslam bench soak --sim-hours 2 [--world-minutes 10] [--max-wall-minutes 90] [--out soak.json] [--json]
+    ocslam bench soak --sim-hours 2 [--world-minutes 10] [--max-wall-minutes 90] [--warm-worlds 1] [--out soak.json] [--json]
 
 One :class:`~app.pipeline.Pipeline` per world (``random_world(seed)``, seeds from ``--seed``), frontier
 exploration until no frontier is left or ``--world-minutes`` of sim time have passed, then the next
@@ -8,13 +8,19 @@ world, until ``--sim-hours`` of sim time in all. Reported:
 
 * **exceptions** (goal 0): uncaught exceptions out of ``Pipeline.step`` (the world is then abandoned)
   plus the errors the loop caught and counted itself (``counters.errors``: detector, SLAM, render…);
-* **RSS** of this process alone ("main") and with its children (the render worker) in MiB: at start (after the first
-  world's first ``--warmup`` sim seconds, so the model and the first map are loaded), at the same point
-  in every later world, and at the end; growth = last / first − 1 (goal < 10 %);
+* **RSS** of this process alone ("main") and with its children (the render worker) in MiB, sampled every
+  ``--sample-every`` sim s and ``--warmup`` sim s into every world. "Start" is the warm state: that sample
+  in world ``--warm-worlds`` (default 1, i.e. after one whole world: the first world loads the model and
+  the catalogue's meshes, and once its pipeline is freed glibc serves later large blocks from its heap,
+  a one-time step that then plateaus; docs/benchmarks.md, "Soak"); growth = the last world's sample /
+  start − 1 (goal < 10 %); the raw growth from world 0's sample is reported beside it;
+* the **floor** each world leaves behind: RSS once its pipeline is closed and collected, then after glibc's
+  ``malloc_trim(0)`` (``--no-trim``: not called); it grows from world to world only with a leak;
 * per world: tracked objects against the objects in the world, keyframes, the frame-skip counters,
   real-time factor.
 
-``--out FILE`` is rewritten after every world, so a run that is stopped still leaves its figures.
+``--out FILE`` is rewritten after every world and every minute within one (the world in progress marked
+``"partial"``), so a run that is stopped still leaves its figures.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from app.ocslam.islands import cluster_extents, components, islands_linkage
+from app.ocslam.islands import close_pairs, cluster_extents, components, islands_linkage
 
 
 @settings(max_examples=200, deadline=None)
@@ -38,3 +38,18 @@ def test_islands_split_at_gaps_larger_than_the_threshold() -> None:
     labels, ext = cluster_extents(pts, 0.1)
     assert labels.tolist() == [0, 0, 0, 1, 1, 2]
     np.testing.assert_allclose(ext, [0.10, 0.05, 0.0], atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(2, 80), st.floats(0.02, 0.3))
+def test_islands_from_the_scans_pairs_equal_islands_from_their_own_tree(seed: int, n: int, gap: float) -> None:
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-1.0, 1.0, (n, 2))
+    idx = np.sort(rng.choice(n, size=int(rng.integers(1, n + 1)), replace=False))
+    own = islands_linkage(pts[idx], idx, gap)
+    shared = islands_linkage(pts[idx], idx, gap, close_pairs(pts, gap))
+    assert [i.indices.tolist() for i in own] == [i.indices.tolist() for i in shared]
+    labels, ext = cluster_extents(pts, gap)
+    labels2, ext2 = cluster_extents(pts, gap, pairs_within_gap=close_pairs(pts, gap))
+    np.testing.assert_array_equal(labels, labels2)
+    np.testing.assert_array_equal(ext, ext2)

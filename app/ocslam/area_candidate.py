@@ -44,12 +44,14 @@ def area_candidate(
     cam: CameraModel,
     scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None],
     other_boxes: FloatArray | None = None,
+    scan_pairs: NDArray[np.int64] | None = None,
 ) -> tuple[Candidate | None, list[Island]]:
     """The object bounding area ``k`` proposes in this frame (``None``: no consistent island, and no
     ground-plane placement), and the area's islands. ``pts``: ``(N, 2)`` scan points (``base_scan``),
     ``idx`` those assigned to the area; ``beam_b``/``beam_r``: every beam about the apex;
     ``other_boxes``: ``(M, 4)`` the frame's other boxes (camera pixels), whose objects may hide this
-    one's lower part."""
+    one's lower part; ``scan_pairs``: the scan's point pairs within the island threshold
+    (:func:`app.ocslam.islands.close_pairs`), to cluster the area's points without a KD-tree of its own."""
     pc = prior(area.label)
     z_lidar = cam.lidar_height
     ray_dir_scan = np.array([np.cos(area.bearing_center), np.sin(area.bearing_center)])
@@ -66,7 +68,7 @@ def area_candidate(
 
     islands: list[Island] = []
     if not pc.below_plane(z_lidar) and len(idx):
-        islands = islands_linkage(pts[idx], idx, float(cfg.island_threshold_m))
+        islands = islands_linkage(pts[idx], idx, float(cfg.island_threshold_m), scan_pairs)
         labels, extents = scan_clusters
         if labels is not None and extents is not None:
             for isl in islands:
@@ -288,7 +290,7 @@ def _grid_free(
     known = v >= 0
     if known.sum() < 3:
         return False
-    return bool(np.mean((v[known] < 20)) > 0.6)
+    return bool(np.mean(v[known] < 20) > 0.6)
 
 def _group_legs(best: int, islands: list[Island], eligible: list[int], pc: ClassPrior) -> list[int]:
     """Legs: add leg-sized islands, nearest first, while the union fits the class's footprint."""

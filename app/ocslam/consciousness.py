@@ -38,7 +38,8 @@ map (the two modes keep their objects in different frames).
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,14 +54,23 @@ from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import NO_KEYFRAME
 from app.ocslam.footprint import Footprint
 from app.ocslam.ghosts import decay_tracks
-from app.ocslam.islands import cluster_extents
+from app.ocslam.islands import close_pairs, cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
 from app.ocslam.projection import assign_points, bounding_areas, camera_bound
 from app.ocslam.se2 import Pose2
 from app.ocslam.seed import SeedConsciousness
 from app.ocslam.seed_projection import seed_camera_projection
 from app.ocslam.track_state import tracks_from_state, tracks_state
-from app.ocslam.tracks import Sighting, Track, angle_wrap, create_track, credit_track, export_track, grid_free_fn, update_track
+from app.ocslam.tracks import (
+    Sighting,
+    Track,
+    angle_wrap,
+    create_track,
+    credit_track,
+    export_track,
+    grid_free_fn,
+    update_track,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -213,7 +223,7 @@ class Consciousness:
         self._next_id = int(d.get("next_id", max((t.id for t in tracks), default=-1) + 1))
 
     @classmethod
-    def from_state_dict(cls, d: dict[str, Any], cfg: ConsciousnessConfig, camera: CameraModel) -> "Consciousness":
+    def from_state_dict(cls, d: dict[str, Any], cfg: ConsciousnessConfig, camera: CameraModel) -> Consciousness:
         c = cls(cfg, camera)
         c.load_state_dict(d)
         return c
@@ -353,8 +363,10 @@ class Consciousness:
         member = assign_points(pts_all, areas, exclusive=not ownership, range_tolerance=float(cfg.range_tolerance))
 
         # the whole scan's clusters: an island clipped by its area may belong to a wall
+        gap = float(cfg.island_threshold_m)
+        scan_pairs = close_pairs(pts_all, gap) if areas else None  # one KD-tree a frame, shared by every area
         labels, extents = (
-            cluster_extents(pts_all, float(cfg.island_threshold_m), np.flatnonzero(valid), float(scan.angle_increment), len(ranges))
+            cluster_extents(pts_all, gap, np.flatnonzero(valid), float(scan.angle_increment), len(ranges), pairs_within_gap=scan_pairs)
             if areas
             else (None, None)
         )
@@ -374,7 +386,7 @@ class Consciousness:
             others = box_px[[j for j in range(len(areas)) if j != k and areas[j].label != area.label]] if ownership else None
             cand, isl = area_candidate(
                 k, area, pts_all, idx, beam_b_apex, beam_r_apex, T_map_scan, T_map_base, grid, rep, cfg, cam, self._scan_clusters,
-                others,
+                others, scan_pairs,
             )
             rep.islands[k] = isl
             candidates[k] = cand

@@ -117,6 +117,7 @@ def cluster_extents(
     n_beams: int = 0,
     max_incidence_deg: float = 10.0,
     sigma_m: float = 0.01,
+    pairs_within_gap: NDArray[np.int64] | None = None,
 ) -> tuple[NDArray[np.int64], FloatArray]:
     """Clusters of a whole scan, for telling a small object from a piece of a larger surface.
 
@@ -124,14 +125,18 @@ def cluster_extents(
     closer than the adaptive breakpoint distance ``r·sin(Δφ)/sin(λ − Δφ) + 3σ`` (Borges & Aldon), so a
     wall seen at a grazing angle — a chain of sparse points — stays one surface instead of a row of
     "legs". ``beam_index``: ``(N,)`` beam number of each point (scan order), ``n_beams`` the scan's
-    size. Returns ``(N,)`` cluster labels and ``(C,)`` cluster extents (bounding-box diagonals).
+    size; ``pairs_within_gap``: :func:`close_pairs` of ``points`` at ``gap_m`` when the caller has them.
+    Returns ``(N,)`` cluster labels and ``(C,)`` cluster extents (bounding-box diagonals).
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     n = len(pts)
     labels = np.full(n, -1, dtype=np.int64)
     if n == 0:
         return labels, np.zeros(0)
-    pairs = [cKDTree(pts).query_pairs(r=gap_m, output_type="ndarray")] if n > 1 else []
+    if pairs_within_gap is not None:  # the caller's close_pairs(points, gap_m)
+        pairs = [np.asarray(pairs_within_gap, dtype=np.int64).reshape(-1, 2)] if n > 1 else []
+    else:
+        pairs = [close_pairs(pts, gap_m)] if n > 1 else []
     if beam_index is not None and n > 1 and angle_increment > 0.0:
         bi = np.asarray(beam_index, dtype=np.int64)
         nxt = np.roll(np.arange(n), -1)
@@ -153,10 +158,22 @@ def cluster_extents(
     return labels.astype(np.int64), np.hypot(*(hi - lo).T)
 
 
-def islands_linkage(points: FloatArray, indices: NDArray[np.int64], gap_m: float) -> list[Island]:
+def close_pairs(points: FloatArray, gap_m: float) -> NDArray[np.int64]:
+    """``(P, 2)`` index pairs ``i < j`` of ``(N, 2)`` points within ``gap_m`` of each other (KD-tree)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(pts) < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    return np.asarray(cKDTree(pts).query_pairs(r=gap_m, output_type="ndarray"), dtype=np.int64).reshape(-1, 2)
+
+
+def islands_linkage(
+    points: FloatArray, indices: NDArray[np.int64], gap_m: float, scan_pairs: NDArray[np.int64] | None = None
+) -> list[Island]:
     """Single-linkage islands: ``(K, 2)`` points → islands whose internal gaps are all ≤ ``gap_m``.
 
-    Islands come out sorted by their first point index (scan order).
+    Islands come out sorted by their first point index (scan order). ``scan_pairs``: the whole scan's
+    :func:`close_pairs` at ``gap_m``, in the index space of ``indices`` (the pairs of a subset are those
+    of the whole with both ends in it): given, no KD-tree is built per area.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     idx = np.asarray(indices, dtype=np.int64).reshape(-1)
@@ -165,7 +182,14 @@ def islands_linkage(points: FloatArray, indices: NDArray[np.int64], gap_m: float
         return []
     if n == 1:
         return [Island(pts.copy(), idx.copy(), buffer_m=gap_m / 2.0)]
-    pairs = cKDTree(pts).query_pairs(r=gap_m, output_type="ndarray")
+    if scan_pairs is not None and len(idx) and idx.min() >= 0:
+        local = np.full(max(int(idx.max()), int(scan_pairs.max(initial=-1))) + 1, -1, dtype=np.int64)
+        local[idx] = np.arange(n)
+        sp = np.asarray(scan_pairs, dtype=np.int64).reshape(-1, 2)
+        sel = sp[(local[sp[:, 0]] >= 0) & (local[sp[:, 1]] >= 0)]
+        pairs = local[sel]
+    else:
+        pairs = close_pairs(pts, gap_m)
     n_comp, labels = components(n, pairs[:, 0], pairs[:, 1])
     out = []
     for c in range(n_comp):

@@ -156,6 +156,9 @@ class ObjectEvidence:
     # -- corrections -----------------------------------------------------------------------------
     def transform(self, deltas: dict[int, Pose2]) -> None:
         """Move every piece seen from keyframe ``k`` by ``deltas[k]`` (``T_map_kf_new ∘ T_map_kf_old⁻¹``)."""
+        if len(deltas) > 8:
+            self._transform_many(deltas)
+            return
         for k, T in deltas.items():
             m = self.point_kf == k
             if np.any(m):
@@ -168,6 +171,42 @@ class ObjectEvidence:
                 self.ray_dir[m] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
             if self.gp_center is not None and self.gp_kf == k:
                 self.gp_center = T.transform_points(self.gp_center[None, :])[0]
+
+    def _transform_many(self, deltas: dict[int, Pose2]) -> None:
+        """:meth:`transform` for many keyframes at once (a loop closure moves most of them): each piece
+        looks its keyframe's delta up instead of one mask per keyframe; the same arithmetic
+        (``Pose2.transform_points``' per element, cos/sin of each delta's yaw as there)."""
+        ks = np.array(sorted(deltas), dtype=np.int64)
+        poses = [deltas[int(k)] for k in ks]
+        tx = np.array([T.x for T in poses])
+        ty = np.array([T.y for T in poses])
+        cs = np.array([np.cos(T.yaw) for T in poses])
+        sn = np.array([np.sin(T.yaw) for T in poses])
+
+        def lookup(kf: NDArray[np.int64]) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
+            j = np.clip(np.searchsorted(ks, kf), 0, len(ks) - 1)
+            return ks[j] == kf, j
+
+        m, j = lookup(self.point_kf)
+        if np.any(m):
+            j = j[m]
+            p = self.points[m]
+            out = np.empty_like(p)
+            out[:, 0] = cs[j] * p[:, 0] - sn[j] * p[:, 1] + tx[j]
+            out[:, 1] = sn[j] * p[:, 0] + cs[j] * p[:, 1] + ty[j]
+            self.points[m] = out
+        m, j = lookup(self.ray_kf)
+        if np.any(m):
+            j = j[m]
+            o = self.ray_origin[m]
+            out = np.empty_like(o)
+            out[:, 0] = cs[j] * o[:, 0] - sn[j] * o[:, 1] + tx[j]
+            out[:, 1] = sn[j] * o[:, 0] + cs[j] * o[:, 1] + ty[j]
+            self.ray_origin[m] = out
+            d = self.ray_dir[m]
+            self.ray_dir[m] = np.stack([cs[j] * d[:, 0] - sn[j] * d[:, 1], sn[j] * d[:, 0] + cs[j] * d[:, 1]], axis=1)
+        if self.gp_center is not None and self.gp_kf in deltas:
+            self.gp_center = deltas[self.gp_kf].transform_points(self.gp_center[None, :])[0]
 
     def latest_keyframe(self) -> int:
         ks = [int(self.point_kf.max()) if len(self.point_kf) else NO_KEYFRAME]

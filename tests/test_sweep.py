@@ -1,0 +1,113 @@
+"""``ocslam sweep`` end to end on one short recording: the trace replays the full replay exactly, and a
+4-trial sweep on local Ray gives the results table, a best config that loads, and resumes after an
+interruption."""
+
+from __future__ import annotations
+
+import csv
+import json
+import pickle
+
+import pytest
+
+from app.config import Config
+from app.ocslam.messages import Detection, Detections
+
+pytest.importorskip("ray")
+
+DURATION = 10.0  # sim seconds of the recording
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    from app.sweep.suite import record_world, suite_worlds
+
+    folder = tmp_path_factory.mktemp("sweep") / "rec"
+    w = suite_worlds("zoo-dev", ["meeting_room"])[0]
+    meta = record_world(Config().to_dict(), w, folder, 0.2, DURATION)
+    assert meta["sim_time_s"] == pytest.approx(DURATION, abs=0.05)
+    return folder
+
+
+def test_filter_detections_known_answer():
+    from app.sweep.trace import filter_detections
+
+    d = Detections(1.0, 64, 48, ())
+    assert filter_detections(d, 0.5) is d
+    mk = lambda conf: Detection(x1=0.0, y1=0.0, x2=10.0, y2=10.0, class_id=0, confidence=conf)  # noqa: E731
+    d = Detections(1.0, 64, 48, (mk(0.9), mk(0.5), mk(0.3)))
+    assert [b.confidence for b in filter_detections(d, 0.5).boxes] == [0.9, 0.5]
+    assert filter_detections(d, 0.3) is d
+    assert filter_detections(d, 0.95).boxes == ()
+
+
+@pytest.mark.slow
+def test_trace_reproduces_the_full_replay(recording):
+    """The trace's consciousness-only replay gives the object map the full --reuse-detections replay gives."""
+    from app.ros2.replay import ReplayCore
+    from app.sweep.trace import build_trace, open_bag, replay_trace
+
+    cfg = Config()
+    cfg.set("detector.confidence", 0.2)
+    cfg.set("replay.snapshot_period_s", 3600.0)
+    tr = build_trace(recording / "bag", cfg, "mr", 0.2)
+    assert tr.info["frames"] > 20
+    core = ReplayCore(cfg, open_bag(recording / "bag", cfg), reuse_detections=True)
+    core.run()
+    full = sorted((o.label, o.pose.x, o.pose.y, o.presence) for o in core.objects_in_map())
+    mine = sorted((o.label, o.pose.x, o.pose.y, o.presence) for o in replay_trace(tr, cfg))
+    assert full and mine == full
+    tr2 = pickle.loads(pickle.dumps(tr))  # what travels through Ray's object store
+    assert sorted((o.label, o.pose.x, o.pose.y, o.presence) for o in replay_trace(tr2, cfg)) == full
+
+
+@pytest.mark.slow
+def test_four_trial_sweep_table_best_config_and_resume(recording, tmp_path):
+    import ray
+
+    from app.sweep.results import best_row, write_best, write_plots, write_table
+    from app.sweep.spec import parse_spec
+    from app.sweep.trace import score_trace
+    from app.sweep.trial import trial_config
+    from app.sweep.tune import RESULTS, read_results, run_sweep
+
+    spec = parse_spec({"name": "t4", "suite": {"bags": [str(recording / "bag")]},
+                       "params": {"consciousness.presence_threshold": {"range": [0.3, 0.9], "step": 0.05},
+                                  "consciousness.frames_for_presence": [1, 2, 5],
+                                  "detector.confidence": {"range": [0.2, 0.6], "step": 0.05}},
+                       "trials": 4, "seed": 3, "include_defaults": True})
+    out = tmp_path / "out"
+    try:
+        info = run_sweep(spec, out, workers=2, cache=tmp_path / "cache", stop_after=1, quiet=True)
+        first = read_results(out / RESULTS)
+        assert info["cluster"]["local"] and 1 <= len(first) < 4  # interrupted after the first trial
+        info = run_sweep(spec, out, workers=2, cache=tmp_path / "cache", resume=True, quiet=True)
+    finally:
+        ray.shutdown()
+    assert info["resumed"]
+    rows = read_results(out / RESULTS)
+    assert len(rows) == 4 and len({r["trial_id"] for r in rows}) == 4
+    assert {r["trial_id"] for r in first} <= {r["trial_id"] for r in rows}
+    assert any(r["params"] == spec.defaults() for r in rows)  # include_defaults: the base values are a trial
+    # each trial's figures are what its configuration gives on the recording (recomputed here)
+    with open(next((tmp_path / "cache").glob("bag-*/trace-*.pkl")), "rb") as f:
+        tr = pickle.load(f)
+    for r in rows:
+        cfg = trial_config(spec.base_config().to_dict(), r["params"])
+        assert r["per_world"]["rec"]["f1"] == pytest.approx(score_trace(tr, cfg)["f1"])
+        assert r["mean_f1"] == pytest.approx(r["per_world"]["rec"]["f1"])
+    csv_path, md_path = write_table(spec, rows, out)
+    with open(csv_path, encoding="utf-8") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == 4 and {"consciousness.presence_threshold", "f1[rec]", "mean_f1", "objective"} <= set(table[0])
+    assert md_path.read_text(encoding="utf-8").count("\n| ") == 5  # header + 4 trials
+    best = best_row(rows)
+    assert best["objective"] == max(r["objective"] for r in rows)
+    y = write_best(spec, rows, out)
+    loaded = Config.load(y)  # what `ocslam run --config` does
+    for k, v in best["params"].items():
+        assert loaded.get(k) == pytest.approx(v)
+    plots = write_plots(spec, rows, out)
+    assert {p.name for p in plots} >= {"precision_recall.png", "f1_vs_consciousness_frames_for_presence.png"}
+    assert all(p.stat().st_size > 1000 for p in plots)
+    assert json.loads((out / RESULTS).read_text().splitlines()[0])["trial_id"]

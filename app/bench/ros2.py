@@ -1,6 +1,6 @@
 """ROS 2 bags: what recording costs the loop, and how closely a replay reproduces the recorded run.
 
-    ocslam bench ros2 --duration 60                 # record the tour, replay it twice (reuse / detector)
+    ocslam bench ros2 --duration 60                 # record the tour, replay it (reuse / detector / SLAM trace)
     ocslam bench ros2 --duration 60 --ab 2          # + the loop's RTF without recording (alternating runs)
     ocslam bench ros2 --set replay.record_image_format=png
 
@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from app.ros2.compare import object_map_difference, trajectory_difference
     from app.ros2.reader import read_bag
     from app.ros2.replay import ReplayCore
+    from app.ros2.slam_trace import TraceReplay, attach_recorder, load_trace, save_trace, trace_from_core
 
     cfg = Config.load(None, args.overrides)
     tmp = Path(tempfile.mkdtemp(prefix="ocslam-bench-ros2-"))
@@ -83,8 +84,12 @@ def run(args: argparse.Namespace) -> int:
         for reuse in (True, False):
             t0 = time.perf_counter()
             core = ReplayCore(cfg, read_bag(bag, with_images=not reuse), reuse_detections=reuse)
+            core.keep_snapshots = False  # as headless replay
+            rec = attach_recorder(core) if reuse else None
             core.run()
             wall = time.perf_counter() - t0
+            if rec is not None:
+                save_trace(trace_from_core(core, rec, "bench"), tmp / "trace.pkl")
             td = trajectory_difference(*live_traj, *core.slam.trajectory())
             od = object_map_difference(live_objs, core.objects_in_map(), thr)
             rows["reuse-detections" if reuse else "detector re-run"] = {
@@ -94,6 +99,18 @@ def run(args: argparse.Namespace) -> int:
                 "objects_live": od["a"], "objects_replay": od["b"], "objects_matched": od["matched"],
                 "object_max_m": od["max_m"],
             }
+        # the next --reuse-detections replay of the same bag and SLAM settings: the SLAM trace (loaded from disk)
+        t0 = time.perf_counter()
+        traced = TraceReplay(load_trace(tmp / "trace.pkl"), cfg)
+        traced.run()
+        wall = time.perf_counter() - t0
+        td = trajectory_difference(*live_traj, *traced.slam.trajectory())
+        od = object_map_difference(live_objs, traced.objects_in_map(), thr)
+        rows["reuse-detections, SLAM trace"] = {
+            "wall_s": round(wall, 2), "core_s": round(traced.wall_s, 2), "stages_s": {"consciousness": round(traced.wall_s, 2)},
+            "trajectory_max_m": td["max_m"], "trajectory_matched": f"{td['matched']}/{td['of']}",
+            "objects_live": od["a"], "objects_replay": od["b"], "objects_matched": od["matched"], "object_max_m": od["max_m"],
+        }
         pipe.close()
         result = {
             "duration_s": args.duration, "image_format": cfg.replay.record_image_format,

@@ -33,6 +33,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="read only these topics (plus /tf_static)")
     p.add_argument("--reuse-detections", action="store_true",
                    help="run the consciousness on the recorded /yolo_boxes instead of the detector on the images")
+    p.add_argument("--slam-trace", choices=("auto", "off", "refresh"), default="auto",
+                   help="headless --reuse-detections: keep the SLAM's side of the replay (poses, keyframes, grid, "
+                        "corrections) in the cache and reuse it while the bag, the SLAM/replay settings and "
+                        "consciousness.mode/sync_tolerance_s/corner_check are unchanged, so only the object map "
+                        "re-runs (auto, default); off: always re-run the SLAM; refresh: re-run and store it")
+    p.add_argument("--cache-dir", type=Path, default=None,
+                   help="where SLAM traces are kept (default $OCSLAM_CACHE_DIR/replay or ~/.cache/ocslam/replay)")
     p.add_argument("--out", type=Path, help="headless: run directory (default runs/replay-<time>)")
     p.add_argument("--host", default=None, help="web app bind address (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=None, help="web app port (default 8080; 0 = any free port)")
@@ -64,9 +71,35 @@ def open_replay(args: argparse.Namespace):
     return cfg, core
 
 
+def _trace_path(args: argparse.Namespace):
+    """``(key, path)`` of the SLAM trace this headless ``--reuse-detections`` replay may use, else None."""
+    if not (args.headless and args.reuse_detections) or getattr(args, "slam_trace", "off") == "off" or args.rate:
+        return None
+    from app.ros2.slam_trace import default_cache_dir, trace_key
+
+    cfg = config_from_args(args)
+    key = trace_key(args.bag, cfg, args.start, args.topics)
+    return key, (args.cache_dir or default_cache_dir()) / f"{key}.pkl"
+
+
 def run(args: argparse.Namespace) -> int:
     from app.ros2.errors import BagError
 
+    try:
+        traced = _trace_path(args)
+    except (OSError, ValueError) as e:  # the cache is an optimisation: never a reason to fail
+        print(f"ocslam replay: warning: SLAM trace unavailable: {e}", file=sys.stderr)
+        traced = None
+    if traced is not None and args.slam_trace == "auto":
+        from app.ros2.slam_trace import TraceReplay, load_trace
+
+        trace = load_trace(traced[1])
+        if trace is not None and trace.key == traced[0]:
+            core = TraceReplay(trace, config_from_args(args))
+            if not args.quiet:
+                print(f"ocslam replay: SLAM from the trace {traced[1]} (consciousness only; --slam-trace off re-runs it)",
+                      file=sys.stderr)
+            return run_headless(core, out=args.out, quiet=args.quiet)
     try:
         cfg, core = open_replay(args)
     except BagError as e:
@@ -75,7 +108,21 @@ def run(args: argparse.Namespace) -> int:
     for w in core.warnings:
         print(f"ocslam replay: warning: {w}", file=sys.stderr)
     if args.headless:
-        return run_headless(core, out=args.out, rate=args.rate, quiet=args.quiet)
+        core.keep_snapshots = False  # nothing seeks
+        rec = None
+        if traced is not None and core.fusing:
+            from app.ros2.slam_trace import attach_recorder
+
+            rec = attach_recorder(core)
+        rc = run_headless(core, out=args.out, rate=args.rate, quiet=args.quiet)
+        if rec is not None and rc == 0:
+            from app.ros2.slam_trace import save_trace, trace_from_core
+
+            try:
+                save_trace(trace_from_core(core, rec, traced[0]), traced[1])
+            except OSError as e:
+                print(f"ocslam replay: warning: SLAM trace not saved: {e}", file=sys.stderr)
+        return rc
     if args.host is not None:
         cfg.set("server.host", args.host)
     if args.port is not None:

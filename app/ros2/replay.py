@@ -94,8 +94,8 @@ class ReplayCore:
     camera and ``reuse_detections`` is off), ``None``, or a detector object with ``detect(Image)``."""
 
     def __init__(self, cfg: Config, bag: Bag, *, reuse_detections: bool = False, detector: Any = "auto") -> None:
-        from app.ocslam.consciousness import Consciousness
         from app.ocslam.camera import CameraModel
+        from app.ocslam.consciousness import Consciousness
         from app.ocslam.slam import Slam
         from app.sim.robot_model import RobotModel
 
@@ -161,6 +161,8 @@ class ReplayCore:
         self._Slam, self._Consciousness = Slam, Consciousness
         self.state = self._fresh_state()
         self.snapshots: list[_State] = []
+        #: snapshots of the state for seeking (the web timeline); a headless replay never seeks
+        self.keep_snapshots = True
         self.timer: dict[str, float] = {"slam": 0.0, "detector": 0.0, "consciousness": 0.0, "decode": 0.0}
         self.wall_s = 0.0
         self.t_start = bag.events[0].t if bag.events else 0.0
@@ -214,7 +216,7 @@ class ReplayCore:
         st = self.state
         if st.index >= len(self.bag.events):
             return None
-        if not self.snapshots or st.t >= self.snapshots[-1].t + self.cfg.replay.snapshot_period_s:
+        if self.keep_snapshots and (not self.snapshots or st.t >= self.snapshots[-1].t + self.cfg.replay.snapshot_period_s):
             self.snapshots.append(copy.deepcopy(st))
         e = self.bag.events[st.index]
         st.index += 1

@@ -66,8 +66,10 @@ def write_best(spec: Spec, rows: list[dict[str, Any]], out: Path) -> Path | None
     b = best_row(rows)
     if b is None:
         return None
+    from app.sweep.trial import clean
+
     cfg = spec.base_config()
-    for k, v in b["params"].items():
+    for k, v in clean(b["params"]).items():
         cfg.set(k, v)
     return cfg.save(Path(out) / "best.yaml")
 

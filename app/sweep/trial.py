@@ -15,12 +15,17 @@ from typing import Any
 MEAN_KEYS = ("precision_strict", "recall", "f1", "pos_err_mean_m")
 
 
+def clean(params: dict[str, Any]) -> dict[str, Any]:
+    """A trial's values without the float noise of quantised sampling (``0.9500000000000001`` → ``0.95``)."""
+    return {k: round(v, 10) if isinstance(v, float) else v for k, v in params.items()}
+
+
 def trial_config(base: dict[str, Any], params: dict[str, Any]):
     """The base config with a trial's ``{"section.key": value}`` applied (validated)."""
     from app.config import Config
 
     cfg = Config.from_dict(base)
-    for k, v in params.items():
+    for k, v in clean(params).items():
         cfg.set(k, v)
     return cfg
 

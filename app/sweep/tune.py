@@ -239,7 +239,9 @@ def _callbacks(out: Path, total: int, stop_after: int | None, quiet: bool):
                 self._bar.update(min(done, self.total))
 
         def on_trial_result(self, iteration, trials, trial, result, **info):
-            row = {"trial_id": trial.trial_id, "params": dict(trial.config), "objective": result.get("objective"),
+            from app.sweep.trial import clean
+
+            row = {"trial_id": trial.trial_id, "params": clean(dict(trial.config)), "objective": result.get("objective"),
                    **{k: result.get(k) for k in ("mean_precision_strict", "mean_recall", "mean_f1", "mean_pos_err_mean_m",
                                                  "trial_s", "trial_cpu_s", "pid", "host")},
                    "per_world": json.loads(result.get("per_world_json") or "{}"), "time": time.time()}

@@ -12,7 +12,8 @@
       consciousness.presence_threshold: {range: [0.5, 0.95], step: 0.05} # quantised (grid: every step)
       consciousness.frames_for_presence: [2, 3, 5, 8]                    # a list of values
       detector.confidence: {range: [0.2, 0.6], log: false}
-    sampler: random                     # grid | random | optuna (Tune's OptunaSearch, TPE)
+    sampler: random                     # grid | random | optuna (Tune's OptunaSearch, TPE) | oat (one at a
+                                        # time: each parameter's grid with the others at the base values)
     objective: f1                       # f1 | {metric: precision_at_recall, recall_floor: 0.7}
     trials: 200                         # random/optuna: trials (grid: the grid's size)
     include_defaults: true              # random/optuna: the first trial is the base config's values
@@ -31,7 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-SAMPLERS = ("grid", "random", "optuna")
+SAMPLERS = ("grid", "random", "optuna", "oat")
 METRICS = ("f1", "precision_at_recall")
 #: the fields a trial can change while replaying the recordings with the recorded boxes
 REPLAYABLE_SECTIONS = ("consciousness",)
@@ -120,6 +121,18 @@ class Spec:
         """The swept fields' values in the base config (the trial ``include_defaults`` adds)."""
         cfg = self.base_config()
         return {p.path: cfg.get(p.path) for p in self.params}
+
+    def oat_points(self) -> list[dict[str, Any]]:
+        """One-at-a-time sensitivity: the base values, then each parameter's grid values with the others at
+        the base values (the base point once)."""
+        d = self.defaults()
+        pts = [dict(d)]
+        for p in self.params:
+            for v in p.grid_values():
+                q = {**d, p.path: v}
+                if q not in pts:
+                    pts.append(q)
+        return pts
 
     def floor(self) -> float:
         """The detector threshold recordings are made at: the lowest any trial asks for (and ≤ the base's)."""
@@ -259,7 +272,7 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
                 config=str(cfg_path) if cfg_path else None, set=dict(sets), sampler=sampler, objective=objective,
                 trials=trials, seed=seed, duration=float(dur), include_defaults=inc,
                 source=source)
-    if sampler == "grid":
+    if sampler in ("grid", "oat"):
         for p in plist:
             p.grid_values()
     try:

@@ -188,6 +188,8 @@ def param_space(spec: Spec) -> dict[str, Any]:
     for p in spec.params:
         if spec.sampler == "grid":
             space[p.path] = tune.grid_search(p.grid_values())
+        elif spec.sampler == "oat":
+            space[p.path] = tune.choice(p.grid_values())  # every trial is one of the points to evaluate
         elif p.values is not None:
             space[p.path] = tune.choice(p.values)
         elif p.kind == "int":
@@ -211,6 +213,8 @@ def _search_alg(spec: Spec, workers: int):
     from ray.tune.search.basic_variant import BasicVariantGenerator
 
     points = [spec.defaults()] if spec.include_defaults and spec.sampler == "random" else None
+    if spec.sampler == "oat":
+        points = spec.oat_points()
     return BasicVariantGenerator(random_state=spec.seed, max_concurrent=workers, points_to_evaluate=points)
 
 
@@ -279,6 +283,8 @@ def read_results(path: Path) -> list[dict[str, Any]]:
 
 
 def total_trials(spec: Spec) -> int:
+    if spec.sampler == "oat":
+        return len(spec.oat_points())
     if spec.sampler == "grid":
         n = 1
         for p in spec.params:
@@ -328,7 +334,7 @@ def run_sweep(spec: Spec, out: Path, *, workers: int = 2, address: str | None = 
             trainable,
             param_space=param_space(spec),
             tune_config=tune.TuneConfig(metric="objective", mode="max", search_alg=_search_alg(spec, workers),
-                                        num_samples=1 if spec.sampler == "grid" else spec.trials,
+                                        num_samples=1 if spec.sampler == "grid" else total_trials(spec),
                                         max_concurrent_trials=workers, reuse_actors=True),
             run_config=tune.RunConfig(name=TUNE_DIR, storage_path=str(out), callbacks=callbacks,
                                       verbose=0, log_to_file=True),

@@ -101,3 +101,15 @@ def test_example_spec_is_valid():
 
     s = load_spec(PROJECT_ROOT / "assets" / "sweeps" / "six-constants.yaml")
     assert len(s.params) == 6 and s.replayable and s.trials == 200
+
+
+def test_oat_points_vary_one_parameter_at_a_time():
+    s = spec(sampler="oat", params={"consciousness.presence_threshold": [0.6, 0.8, 0.9],
+                                    "consciousness.frames_for_presence": [3, 5, 8]})
+    pts = s.oat_points()
+    d = {"consciousness.presence_threshold": 0.8, "consciousness.frames_for_presence": 5}
+    assert pts[0] == d and len(pts) == 5  # the base point once, then 2 + 2 changes
+    assert all(sum(p[k] != d[k] for k in d) == 1 for p in pts[1:])
+    from app.sweep.tune import total_trials
+
+    assert total_trials(s) == 5

@@ -18,7 +18,7 @@ import argparse
 import importlib
 import os
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 #: name → (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {

@@ -12,9 +12,10 @@ import copy
 import dataclasses
 import os
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import yaml
 
@@ -269,10 +270,10 @@ class Config:
             for f in dataclasses.fields(obj):
                 yield f"{section}.{f.name}", f, getattr(obj, f.name)
 
-    def copy(self) -> "Config":
+    def copy(self) -> Config:
         return copy.deepcopy(self)
 
-    def validate(self) -> "Config":
+    def validate(self) -> Config:
         for section in SECTIONS:
             validate_section(section, getattr(self, section))
         return self
@@ -282,7 +283,7 @@ class Config:
         return {s: dataclasses.asdict(getattr(self, s)) for s in SECTIONS}
 
     @classmethod
-    def from_dict(cls, data: Any, *, source: str = "config") -> "Config":
+    def from_dict(cls, data: Any, *, source: str = "config") -> Config:
         cfg = cls()
         if data is None:
             return cfg
@@ -303,7 +304,7 @@ class Config:
         return cfg
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str] | None = None, overrides: list[str] | None = None) -> "Config":
+    def load(cls, path: str | os.PathLike[str] | None = None, overrides: list[str] | None = None) -> Config:
         """Defaults, then the YAML file (if any), then ``section.key=value`` overrides."""
         if path is None:
             cfg = cls()

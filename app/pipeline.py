@@ -31,8 +31,9 @@ import logging
 import queue
 import time
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import Future
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -73,8 +74,8 @@ def camera_render_size(cfg: Config) -> tuple[int, int]:
 
 def build_camera_model(cfg: Config, robot_model: Any):
     """The camera model of the consciousness: K from the FOV at the rendered size, extrinsics from the URDF."""
-    from app.ocslam.messages import CameraInfo
     from app.ocslam.camera import CameraModel
+    from app.ocslam.messages import CameraInfo
 
     w, h = camera_render_size(cfg)
     return CameraModel(
@@ -265,7 +266,7 @@ class Pipeline(Autonomy, CameraFusion, RunMetrics):
     # ---------------------------------------------------------------------------------------------
     # commands from other threads
     # ---------------------------------------------------------------------------------------------
-    def submit(self, fn: Callable[["Pipeline"], Any]) -> None:
+    def submit(self, fn: Callable[[Pipeline], Any]) -> None:
         """Run ``fn(pipeline)`` in the loop thread before the next step (thread-safe)."""
         self.commands.put(fn)
 

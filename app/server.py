@@ -13,18 +13,17 @@ Example:
 from __future__ import annotations
 
 import logging
-import math
 import os
 import socket
 import threading
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
 from app.config import PROJECT_ROOT, Config, ConfigError
-
 from app.ui.security import PathRefused, confine_path, is_loopback, new_token, safe_message
 
 log = logging.getLogger(__name__)
@@ -94,7 +93,7 @@ class OcslamApp:
         shown = "127.0.0.1" if host in ("0.0.0.0", "::", "") else (f"[{host}]" if ":" in host else host)
         return f"http://{shown}:{self.port}" + (f"/?token={self.token}" if self.token else "")
 
-    def start(self) -> "OcslamApp":
+    def start(self) -> OcslamApp:
         self._thread.start()
         return self
 

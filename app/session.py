@@ -35,8 +35,9 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -92,7 +93,7 @@ def object_to_detection3d(o: TrackedObject, stamp: float, frame_id: str) -> dict
     }
 
 
-def objects_json(pipe: "Pipeline", *, all_objects: bool = False) -> dict[str, Any]:
+def objects_json(pipe: Pipeline, *, all_objects: bool = False) -> dict[str, Any]:
     """The object map in the map frame (objects at presence ≥ threshold unless ``all_objects``)."""
     thr = pipe.cfg.consciousness.presence_threshold
     out = []
@@ -344,7 +345,7 @@ def _finite_or_none(x: Any) -> Any:
     return x
 
 
-def write_session_files(pipe: "Pipeline", out: Path, *, summary: dict[str, Any] | None = None) -> None:
+def write_session_files(pipe: Pipeline, out: Path, *, summary: dict[str, Any] | None = None) -> None:
     """Write every file of a run directory into the existing directory ``out`` (see :func:`save_session`)."""
     from app.ocslam.mapio import save_map
 
@@ -368,7 +369,7 @@ def write_session_files(pipe: "Pipeline", out: Path, *, summary: dict[str, Any] 
         log.warning("scene recording not written: %s", e)
 
 
-def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] | None = None, server: Any = None,
+def save_session(pipe: Pipeline, out: str | Path, *, summary: dict[str, Any] | None = None, server: Any = None,
                  extra: Callable[[Path], Any] | None = None) -> Path:
     """Write the run directory ``out`` as a unit (:func:`write_run_dir`); ``extra(tmp)`` may add more to it
     (e.g. a bag) before it is renamed into place. Returns ``out`` (absolute). :class:`SessionError` if
@@ -382,7 +383,7 @@ def save_session(pipe: "Pipeline", out: str | Path, *, summary: dict[str, Any] |
     return write_run_dir(out, write)
 
 
-def session_state(pipe: "Pipeline") -> dict[str, Any]:
+def session_state(pipe: Pipeline) -> dict[str, Any]:
     return {
         "version": SESSION_VERSION,
         "world": pipe.world.name,
@@ -412,7 +413,7 @@ def recording_html(scene_bytes: bytes, dark_mode: bool = False) -> str:
     return client[:i] + inject + client[i:]
 
 
-def recording_bytes(pipe: "Pipeline", *, max_frames: int = 400) -> bytes:
+def recording_bytes(pipe: Pipeline, *, max_frames: int = 400) -> bytes:
     """A `.viser` recording: the final map, objects and graph, with the robot replaying its SLAM trajectory."""
     from app.ui.scene import SceneLayers
     from app.ui.security import create_server
@@ -439,7 +440,7 @@ def recording_bytes(pipe: "Pipeline", *, max_frames: int = 400) -> bytes:
             server.stop()
 
 
-def write_recording(pipe: "Pipeline", out: Path, *, max_frames: int = 400) -> None:
+def write_recording(pipe: Pipeline, out: Path, *, max_frames: int = 400) -> None:
     """``out/scene.viser`` and ``out/scene.html`` (a self-contained player), each written atomically."""
     data = recording_bytes(pipe, max_frames=max_frames)
     atomic_write_bytes(out / "scene.viser", data)

@@ -40,7 +40,7 @@ class SessionData:
         """The SLAM back end rebuilt from the state (checked: finite keyframe poses and trajectory)."""
         return restore_slam(self.path, slam_cfg if slam_cfg is not None else self.cfg.slam, self.state)
 
-    def check(self) -> "SessionData":
+    def check(self) -> SessionData:
         """Rebuild (and so check) the SLAM and object states too; :class:`SessionError` on any problem."""
         self.slam()
         self.consciousness()
@@ -216,7 +216,7 @@ def read_session(path: str | os.PathLike[str], *, need_config: bool = True) -> S
     return SessionData(path, cfg, state)
 
 
-def load_session(pipe: "Pipeline", path: str | Path) -> None:
+def load_session(pipe: Pipeline, path: str | Path) -> None:
     """Restore map, pose graph, objects and the robot's state from a run directory, to continue mapping.
 
     Everything is read and checked first (:func:`read_session`, world name, rebuilt SLAM and objects); on

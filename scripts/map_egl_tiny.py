@@ -4,16 +4,21 @@ render's own segmentation (objects >= 400 px at 640x480; smaller ones are ignore
 
     python scripts/map_egl_tiny.py [POSES_PER_WORLD=20] [RANDOM_WORLDS=3]   # JSON on stdout (docs/benchmarks.md)
 """
-import json, math, sys, time
+import json
+import math
+import sys
+import time
+
 import numpy as np
+
 from app.bench.detector import coco_evaluate, run_detector
 from app.config import Config, resolve_path
-from app.training.labels import visible_boxes
-from app.training.samples import GtBox, Sample
 from app.ocslam.detector import Detector
 from app.ocslam.messages import CLASS_INDEX
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld
+from app.training.labels import visible_boxes
+from app.training.samples import GtBox, Sample
 from app.world.format import load_world
 from app.world.generator import random_world
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
 
 import pytest
 
@@ -65,7 +65,7 @@ def open_page(context, url: str):
     return page
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = 20.0, interval: float = 0.1, what: str = "condition") -> None:
+def wait_for(cond: Callable[[], bool], timeout: float = 60.0, interval: float = 0.1, what: str = "condition") -> None:
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         if cond():

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.ocslam.messages import CLASS_INDEX, CameraInfo, Detection, Detections, LaserScan
 from app.ocslam.camera import CameraModel
+from app.ocslam.messages import CLASS_INDEX, CameraInfo, Detection, Detections, LaserScan
 from app.ocslam.se2 import Pose2
 
 

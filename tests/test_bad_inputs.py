@@ -10,7 +10,6 @@ is snapshotted (path → bytes) before and compared after. The GUI/server cases 
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import signal
@@ -163,7 +162,6 @@ OUT_CASES = [
 def test_bad_out_is_refused_before_the_run(scratch, capsys, case):
     _, out, message = case
     before = snapshot(scratch)
-    t0 = time.perf_counter()
     rc, _, err = run_cli(["run", "--headless", *FAST, "--duration", "2", "--out", out(scratch)], capsys)
     assert_clear_error(rc, err, message)
     assert snapshot(scratch) == before

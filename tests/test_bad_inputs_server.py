@@ -84,14 +84,14 @@ class RecordingClient(FakeViserClient):
 class OpenRecorder:
     """Records the path of every ``open``/``os.open``/listing in this process while active (audit hook)."""
 
-    _instance: "OpenRecorder | None" = None
+    _instance: OpenRecorder | None = None
 
     def __init__(self) -> None:
         self.active = False
         self.paths: list[str] = []
 
     @classmethod
-    def get(cls) -> "OpenRecorder":
+    def get(cls) -> OpenRecorder:
         if cls._instance is None:
             cls._instance = cls()
             sys.addaudithook(cls._instance._hook)
@@ -101,7 +101,7 @@ class OpenRecorder:
         if self.active and event in ("open", "os.listdir", "os.scandir") and args and isinstance(args[0], (str, bytes, os.PathLike)):
             self.paths.append(os.fsdecode(args[0]))
 
-    def __enter__(self) -> "OpenRecorder":
+    def __enter__(self) -> OpenRecorder:
         self.paths = []
         self.active = True
         return self
@@ -660,7 +660,7 @@ def test_exposed_server_prints_a_token_url_and_refuses_without_it() -> None:
     try:
         m, _ = _read_until(proc, r"open http://127\.0\.0\.1:(\d+)/\?token=([A-Za-z0-9_-]{20,})")
         port, token = int(m.group(1)), m.group(2)
-        _read_until(proc, r"from another machine open http://.*:%d/\?token=%s" % (port, re.escape(token)))
+        _read_until(proc, rf"from another machine open http://.*:{port}/\?token={re.escape(token)}")
         assert _http(port, "/").status == 403
         assert _ws(port) == 403
         assert _http(port, f"/?token={token}").status == 303

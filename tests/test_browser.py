@@ -11,11 +11,10 @@ import time
 
 import numpy as np
 import pytest
+from browser import browser_page, focus_canvas, screenshot, wait_for
 
 from app.config import Config
 from app.server import OcslamApp
-
-from browser import browser_page, focus_canvas, screenshot, wait_for
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

@@ -11,14 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from browser import browser_page, focus_canvas, open_page, screenshot, wait_for
 
 from app.bench.wsclient import FakeViserClient
 from app.config import ASSETS, Config
 from app.ocslam.se2 import Pose2
 from app.server import OcslamApp
 from app.ui.scene import LAYERS
-
-from browser import browser_page, focus_canvas, open_page, screenshot, wait_for
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -111,9 +110,9 @@ def test_layers_are_shown_and_each_toggle_hides_its_layer(app, pages) -> None:
         cb = page.get_by_role("checkbox", name=label)
         assert cb.is_checked() == visible, label
         cb.click()
-        wait_for(lambda: app.layers.is_visible(key) != visible, timeout=10, what=f"layer {key} to toggle")
+        wait_for(lambda k=key, v=visible: app.layers.is_visible(k) != v, what=f"layer {key} to toggle")
         cb.click()
-        wait_for(lambda: app.layers.is_visible(key) == visible, timeout=10, what=f"layer {key} to toggle back")
+        wait_for(lambda k=key, v=visible: app.layers.is_visible(k) == v, what=f"layer {key} to toggle back")
     # a visual check: hiding the simulated world changes what the page shows
     before = screenshot(page, "11-layers-world-on")
     page.get_by_role("checkbox", name="World (simulator)").click()
@@ -207,10 +206,11 @@ def test_hold_button_drives_and_teleop_keys_work(app, pages) -> None:
     start = app.pipeline.sim.true_pose()
     btn = page.get_by_role("button", name="Forward")
     btn.hover()
-    page.mouse.down()
-    time.sleep(2.0)
-    page.mouse.up()
-    wait_for(lambda: app.pipeline.sim.true_pose().distance(start) > 0.1, what="hold-to-drive to move the robot")
+    page.mouse.down()  # held until the robot has moved: a starved page delivers the press late
+    try:
+        wait_for(lambda: app.pipeline.sim.true_pose().distance(start) > 0.1, timeout=60, what="hold-to-drive to move the robot")
+    finally:
+        page.mouse.up()
     assert start.between(app.pipeline.sim.true_pose()).x > 0.1
 
 
@@ -228,7 +228,7 @@ def test_click_on_the_floor_navigates_there(app, pages) -> None:
     time.sleep(2.0)
     canvas = page.locator("canvas").first.bounding_box()
     page.mouse.click(canvas["x"] + canvas["width"] / 2, canvas["y"] + canvas["height"] / 2)  # the look_at point
-    wait_for(lambda: p.drive_mode == "goto", timeout=20, what="a navigation to start")
+    wait_for(lambda: p.drive_mode == "goto", what="a navigation to start")
     screenshot(page, "14-click-to-go")
     wait_for(lambda: p.nav_status == "arrived", timeout=120, what="the robot to arrive")
     assert np.hypot(p.T_map_base.x - goal.x, p.T_map_base.y - goal.y) < 0.35

@@ -37,14 +37,14 @@ def test_static_model_and_fast_dfl_keep_the_outputs(tmp_path: Path) -> None:
 def test_optimize_command_writes_an_int8_model_and_its_card(tmp_path: Path) -> None:
     pytest.importorskip("onnx")
     pytest.importorskip("onnxslim")
+    import shutil
+
     import cv2
 
     from app.cli import main
     from app.ocslam.config import DetectorConfig
     from app.ocslam.detector import Detector
     from app.ocslam.messages import Image
-
-    import shutil
 
     src = tmp_path / "float.onnx"
     shutil.copyfile(FLOAT, src)

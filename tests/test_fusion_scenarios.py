@@ -11,11 +11,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from synthetic_scene import Box, Cylinder, default_camera, detection, detections, raycast, table
 
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.consciousness import Consciousness
 from app.ocslam.se2 import Pose2
-from synthetic_scene import Box, Cylinder, default_camera, detection, detections, raycast, table
 
 CAM = default_camera()
 

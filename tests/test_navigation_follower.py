@@ -228,7 +228,10 @@ def test_backs_off_when_blocked_too_close() -> None:
     something is right behind too; with the wall 20 cm ahead just stop."""
     f = PathFollower(ROBOT)
     f.set_path([[0.0, 0.0], [2.0, 0.0]])
-    wall_at = lambda x: np.stack([np.full(61, x), np.linspace(-0.3, 0.3, 61)], 1)
+
+    def wall_at(x: float) -> np.ndarray:
+        return np.stack([np.full(61, x), np.linspace(-0.3, 0.3, 61)], 1)
+
     cmd = f.compute(Pose2(), scan_of_points(wall_at(0.12)), Pose2())
     assert f.status == "blocked" and cmd.linear_x < 0 and cmd.angular_z == 0
     cmd = f.compute(Pose2(), scan_of_points(np.vstack([wall_at(0.12), wall_at(-0.13)])), Pose2())

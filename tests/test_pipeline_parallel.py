@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from app.config import Config, resolve_path
-from app.ocslam.detector import Detector
 from app.loop.stages import StageJobs
+from app.ocslam.detector import Detector
 from app.pipeline import Pipeline
 
 
@@ -112,7 +112,7 @@ def test_stage_jobs_run_in_order_on_their_threads_or_inline():
         try:
             dets = [jobs.detect(lambda k=k: (time.sleep(0.002 * (3 - k)), k)[1]) for k in range(3)]
             for k in range(3):
-                jobs.estimate(lambda k=k: seen.append((dets[k].result(), threading.current_thread().name)))
+                jobs.estimate(lambda k=k, seen=seen, dets=dets: seen.append((dets[k].result(), threading.current_thread().name)))
             fail = jobs.estimate(lambda: 1 / 0)
             jobs.join()
             assert [k for k, _ in seen] == [0, 1, 2]

@@ -6,9 +6,9 @@ import threading
 
 import pytest
 
+from app import sim_world
 from app.config import Config, resolve_path
 from app.pipeline import Pipeline
-from app import sim_world
 
 
 def _pipe(*over: str) -> Pipeline:
@@ -69,7 +69,7 @@ def test_a_pipeline_stepped_on_another_thread_never_renders_with_egl():
         try:
             assert pipe.sim.renderer == "tiny"
             out = []
-            t = threading.Thread(target=lambda: out.append(pipe.sim.render_camera(80, 60).image.data.shape))
+            t = threading.Thread(target=lambda out=out, pipe=pipe: out.append(pipe.sim.render_camera(80, 60).image.data.shape))
             t.start()
             t.join()
             assert out == [(60, 80, 3)]

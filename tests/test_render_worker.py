@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.config import Config
+from app.config import Config, resolve_path
 from app.ocslam.se2 import Pose2
 from app.sim.render_worker import CameraWorker
 from app.sim_world import SimWorld
 from app.world.format import load_world
-from app.config import resolve_path
 
 
 def test_worker_frames_match_in_process_renders() -> None:

@@ -108,9 +108,9 @@ def test_frame_ids(messages):
 
 
 def test_static_transforms_are_the_robot_model(messages):
-    from app.sim.robot_model import RobotModel
     from app.ros2.convert import transform_to_matrix
     from app.ros2.reader import compose_static
+    from app.sim.robot_model import RobotModel
 
     _, msgs = messages
     static = {(tr.header.frame_id, tr.child_frame_id): transform_to_matrix(tr.transform)

@@ -102,3 +102,21 @@ def test_a_corrupt_trace_is_rebuilt_and_a_mismatched_one_refused(bag, tmp_path):
     assert "mode" in (trace_can_run(trace, cfg) or "")
     with pytest.raises(ValueError):
         TraceReplay(trace, cfg)
+
+
+def test_no_trace_is_kept_unless_the_user_chose_a_cache(bag, tmp_path, monkeypatch):
+    """Without ``--cache-dir`` or ``$OCSLAM_CACHE_DIR`` the replay writes nothing outside its run directory."""
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.delenv("OCSLAM_CACHE_DIR", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    p = argparse.ArgumentParser()
+    replay_cmd.add_arguments(p)
+    args = p.parse_args([str(bag), "--headless", "--reuse-detections", "--quiet", "--out", str(tmp_path / "run")])
+    assert replay_cmd._trace_path(args) is None
+    assert replay_cmd.run(args) == 0
+    assert list(home.rglob("*")) == []
+    monkeypatch.setenv("OCSLAM_CACHE_DIR", str(tmp_path / "cache"))
+    key_path = replay_cmd._trace_path(args)
+    assert key_path is not None and key_path[1].parent == tmp_path / "cache" / "replay"

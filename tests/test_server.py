@@ -125,7 +125,7 @@ def test_record_toggle_writes_a_rosbag2_bag_under_the_runs_directory(tmp_path) -
     try:
         for bad in ("taken", "../outside"):
             c.set_value("Bag folder", bad)
-            wait_for(lambda: a.panels.record_path.value == bad, what="the folder text")
+            wait_for(lambda bad=bad: a.panels.record_path.value == bad, what="the folder text")
             c.set_value("Record (rosbag2 MCAP)", True)
             wait_for(lambda: not a.panels.record_toggle.value and a.recorder is None, what="a refused recording")
         assert not (tmp_path.parent / "outside").exists()

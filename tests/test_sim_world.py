@@ -361,11 +361,10 @@ def test_forced_tiny_renderer_is_used_and_reported():
 def test_a_failed_egl_load_falls_back_to_tiny_with_a_message(monkeypatch, caplog):
     """An EGL plugin that does not load (here: a shared library that is no pybullet plugin) is found by
     the probe in a child process; auto falls back to TinyRenderer and says why, egl refuses."""
+    import _ctypes
     import logging
 
     from app import sim_world
-
-    import _ctypes
 
     monkeypatch.setenv(sim_world.EGL_PLUGIN_ENV, _ctypes.__file__)
     monkeypatch.delenv(sim_world.EGL_PROBE_ENV, raising=False)

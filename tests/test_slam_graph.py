@@ -14,9 +14,8 @@ INFO = np.array([1 / 0.02**2, 1 / 0.02**2, 1 / 0.01**2])
 
 def _square(n_side=5, step=0.5):
     poses = [np.zeros(3)]
-    for k in range(4):
+    for _side in range(4):
         for i in range(n_side):
-            yaw = poses[-1][2]
             if i == n_side - 1:
                 poses.append(compose(poses[-1], [step, 0.0, np.pi / 2]))
             else:

@@ -10,7 +10,7 @@ import pytest
 from app.ocslam.config import SlamConfig
 from app.ocslam.se2 import Pose2, between, compose
 from app.ocslam.slam import Slam
-from app.ocslam.slam.carmen import CarmenLog, beam_layout, read_carmen
+from app.ocslam.slam.carmen import beam_layout, read_carmen
 from app.ocslam.slam.field import build_field
 from app.ocslam.slam.information import odometry_information, scan_information, weakest_direction
 from app.ocslam.slam.keyframes import KeyframeScan

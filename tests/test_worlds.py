@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from app.cli import main as cli_main
 from app.config import Config
@@ -282,9 +284,6 @@ def test_documented_example_and_bundled_worlds_are_valid():
     validate_world(w)  # objects and the start inside the example room's walls
 
 
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
 
 @settings(max_examples=60, deadline=None)
 @given(
@@ -313,7 +312,7 @@ def test_wall_pieces_and_openings_tile_the_wall(length, height, cuts):
     area = sum((s1 - s0) * (z1 - z0) for s0, s1, z0, z1, _, _ in pieces)
     holes = sum((o.end - o.start) * (o.top - o.bottom) for o in openings)
     assert area + holes == pytest.approx(length * height, rel=1e-9)
-    for s0, s1, z0, z1, th, yaw in pieces:
+    for s0, s1, z0, z1, _th, _yaw in pieces:
         assert 0 <= s0 < s1 <= length + 1e-9 and 0 <= z0 < z1 <= height + 1e-9
         for o in openings:  # no piece intrudes into an opening
             assert min(s1, o.end) - max(s0, o.start) <= 1e-9 or min(z1, o.top) - max(z0, o.bottom) <= 1e-9

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from shapely.geometry import LineString, Point
 from shapely.ops import unary_union
 
@@ -23,7 +22,7 @@ from app.ocslam.messages import CLASS_NAMES, GroundTruthObject, TrackedObject
 from app.ocslam.se2 import Pose2
 from app.world.format import dump_world, load_world, world_to_dict
 from app.world.generator import FAMILIES, generate
-from app.world.tour import occluders_for, route_poses, tour_view_counts
+from app.world.tour import route_poses, tour_view_counts
 from app.world.types import ROBOT_RADIUS_M, ROUTE_MARGIN_M
 from app.world.validation import validate_world
 

@@ -21,9 +21,10 @@ import io
 import sys
 import tempfile
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -405,7 +406,7 @@ def run(args: argparse.Namespace) -> int:
         print()
         rows = []
         for th in ("2", "1"):
-            for k, (det, v) in enumerate(zip(dets, out["latency_threads"][th])):
+            for det, v in zip(dets, out["latency_threads"][th]):
                 ratio = out["latency_threads"][th][0]["median"] / v["median"]
                 rows.append([_describe(det), th, v["median"], v["p95"], v["p10"], v["cpu_median"], ratio if len(dets) > 1 else None])
         table(["model", "threads", "median ms", "p95 ms", "p10 ms", "CPU ms", "× first"], rows,

@@ -48,7 +48,7 @@ class FakeViserClient:
         self._dctx = zstandard.ZstdDecompressor()
 
     # -- lifecycle --------------------------------------------------------------------------------
-    def connect(self, timeout: float = 20.0) -> "FakeViserClient":
+    def connect(self, timeout: float = 20.0) -> FakeViserClient:
         self._thread.start()
         if not self._ready.wait(timeout):
             raise TimeoutError(f"could not connect to {self.url}: {self.error}")

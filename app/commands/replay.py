@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "consciousness.mode/sync_tolerance_s/corner_check are unchanged, so only the object map "
                         "re-runs (auto, default); off: always re-run the SLAM; refresh: re-run and store it")
     p.add_argument("--cache-dir", type=Path, default=None,
-                   help="where SLAM traces are kept (default $OCSLAM_CACHE_DIR/replay or ~/.cache/ocslam/replay)")
+                   help="where SLAM traces are kept (default $OCSLAM_CACHE_DIR/replay; with neither, none is kept)")
     p.add_argument("--out", type=Path, help="headless: run directory (default runs/replay-<time>)")
     p.add_argument("--host", default=None, help="web app bind address (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=None, help="web app port (default 8080; 0 = any free port)")
@@ -77,9 +77,12 @@ def _trace_path(args: argparse.Namespace):
         return None
     from app.ros2.slam_trace import default_cache_dir, trace_key
 
+    cache = args.cache_dir or default_cache_dir()
+    if cache is None:  # no cache chosen: nothing is kept, the SLAM re-runs
+        return None
     cfg = config_from_args(args)
     key = trace_key(args.bag, cfg, args.start, args.topics)
-    return key, (args.cache_dir or default_cache_dir()) / f"{key}.pkl"
+    return key, cache / f"{key}.pkl"
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,9 +7,10 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 STAGES = ("physics", "lidar", "render", "detector", "slam", "consciousness", "ui")
 

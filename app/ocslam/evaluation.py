@@ -29,8 +29,9 @@ gathered by an :class:`ObservationLog` from ground truth on the evaluation's sid
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import shapely
@@ -470,7 +471,9 @@ def explain_misses(
             merged = [o for o in on_it if o.label != t.label or o.id in matched_ids]
             astray = [o for o in tracked if o.id in shown_ids and o.label == t.label and o.id not in matched_ids
                       and float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])) <= 2 * match_radius_m]
-            dist = lambda o: float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1]))  # noqa: E731
+            def dist(o: TrackedObject, txy: np.ndarray = txy) -> float:
+                return float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1]))
+
             if merged:
                 o = min(merged, key=dist)
                 cause, detail = "merged", f"into {o.label} #{o.id} ({owner.get(o.id, 'unmatched')})"

@@ -108,7 +108,7 @@ class CameraInfo:
     frame_id: str = "camera_optical_frame"
 
     @staticmethod
-    def from_fov(width: int, height: int, hfov_rad: float, frame_id: str = "camera_optical_frame") -> "CameraInfo":
+    def from_fov(width: int, height: int, hfov_rad: float, frame_id: str = "camera_optical_frame") -> CameraInfo:
         """Ideal pinhole K from the horizontal field of view; square pixels, centred principal point."""
         fx = (width / 2.0) / np.tan(hfov_rad / 2.0)
         K = np.array([[fx, 0.0, width / 2.0], [0.0, fx, height / 2.0], [0.0, 0.0, 1.0]])
@@ -130,7 +130,7 @@ class CameraInfo:
     def cy(self) -> float:
         return float(self.K[1, 2])
 
-    def scaled(self, width: int, height: int) -> "CameraInfo":
+    def scaled(self, width: int, height: int) -> CameraInfo:
         """The same camera at another resolution."""
         sx, sy = width / self.width, height / self.height
         K = self.K.copy()

@@ -40,16 +40,16 @@ class Pose2:
 
     # -- constructors -------------------------------------------------------------------------
     @staticmethod
-    def identity() -> "Pose2":
+    def identity() -> Pose2:
         return Pose2(0.0, 0.0, 0.0)
 
     @staticmethod
-    def from_array(a: ArrayLike) -> "Pose2":
+    def from_array(a: ArrayLike) -> Pose2:
         x, y, t = np.asarray(a, dtype=np.float64).reshape(3)
         return Pose2(float(x), float(y), float(t))
 
     @staticmethod
-    def from_matrix(m: ArrayLike) -> "Pose2":
+    def from_matrix(m: ArrayLike) -> Pose2:
         m = np.asarray(m, dtype=np.float64)
         return Pose2(float(m[0, 2]), float(m[1, 2]), float(np.arctan2(m[1, 0], m[0, 0])))
 
@@ -67,7 +67,7 @@ class Pose2:
         return (float(np.cos(self.yaw / 2)), 0.0, 0.0, float(np.sin(self.yaw / 2)))
 
     # -- group operations ----------------------------------------------------------------------
-    def __matmul__(self, other: "Pose2") -> "Pose2":
+    def __matmul__(self, other: Pose2) -> Pose2:
         c, s = np.cos(self.yaw), np.sin(self.yaw)
         return Pose2(
             self.x + c * other.x - s * other.y,
@@ -75,11 +75,11 @@ class Pose2:
             float(wrap_angle(self.yaw + other.yaw)),
         )
 
-    def inverse(self) -> "Pose2":
+    def inverse(self) -> Pose2:
         c, s = np.cos(self.yaw), np.sin(self.yaw)
         return Pose2(-c * self.x - s * self.y, s * self.x - c * self.y, float(wrap_angle(-self.yaw)))
 
-    def between(self, other: "Pose2") -> "Pose2":
+    def between(self, other: Pose2) -> Pose2:
         """The relative motion ``self⁻¹ ∘ other`` (``other`` expressed in ``self``)."""
         return self.inverse() @ other
 
@@ -92,7 +92,7 @@ class Pose2:
         out[:, 1] = s * p[:, 0] + c * p[:, 1] + self.y
         return out
 
-    def distance(self, other: "Pose2") -> float:
+    def distance(self, other: Pose2) -> float:
         return float(np.hypot(self.x - other.x, self.y - other.y))
 
     def __iter__(self):

@@ -50,14 +50,14 @@ class SeedObject:
     last_seen: float = 0.0
     points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
 
-    def distance(self, other: "SeedObject") -> float:
+    def distance(self, other: SeedObject) -> float:
         return float(np.hypot(*(self.center - other.center)))
 
-    def collides(self, other: "SeedObject") -> bool:
+    def collides(self, other: SeedObject) -> bool:
         d = self.distance(other)
         return d < (self.width + other.width) / 2.0 and d < (self.height + other.height) / 2.0
 
-    def update_data(self, other: "SeedObject", is_new_frame: bool, weight_old: float, frames_for_presence: int) -> None:
+    def update_data(self, other: SeedObject, is_new_frame: bool, weight_old: float, frames_for_presence: int) -> None:
         """Rolling-average centre, sizes only grow; frames and presence only on a new frame (f first)."""
         self.center = weight_old * self.center + (1.0 - weight_old) * other.center
         self.width = max(self.width, other.width)

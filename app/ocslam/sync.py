@@ -21,7 +21,6 @@ from app.ocslam import se2
 from app.ocslam.messages import LaserScan
 from app.ocslam.se2 import Pose2
 
-
 #: Slack added to stamp comparisons (sim stamps accumulate float rounding of their periods).
 STAMP_SLACK_S = 1e-6
 

@@ -44,12 +44,12 @@ TRACE_FIXED = ("mode", "sync_tolerance_s", "corner_check")
 _CODE = ("app/ocslam/slam", "app/ocslam/sync.py", "app/ocslam/se2.py", "app/ros2")
 
 
-def default_cache_dir() -> Path:
-    """``$OCSLAM_CACHE_DIR/replay``, else ``$XDG_CACHE_HOME/ocslam/replay``, else ``~/.cache/ocslam/replay``."""
+def default_cache_dir() -> Path | None:
+    """``$OCSLAM_CACHE_DIR/replay`` when the user set that variable, else None: a replay never writes a
+    cache the user did not choose (``--cache-dir`` chooses one per command)."""
     if os.environ.get("OCSLAM_CACHE_DIR"):
         return Path(os.environ["OCSLAM_CACHE_DIR"]) / "replay"
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "ocslam" / "replay"
+    return None
 
 
 def _code_digest() -> str:

@@ -28,8 +28,8 @@ on both sides of the ratio, so a fully visible object scores 1.0. The rest of th
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
@@ -343,7 +343,7 @@ class SilhouetteRenderer:
                 pass
         self._clients.clear()
 
-    def __enter__(self) -> "SilhouetteRenderer":
+    def __enter__(self) -> SilhouetteRenderer:
         return self
 
     def __exit__(self, *exc) -> None:

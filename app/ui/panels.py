@@ -6,23 +6,20 @@ they never touch pybullet or the estimators directly, and never import the serve
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
-import time
 from collections import deque
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import cv2
 import numpy as np
 import viser
 import viser.uplot
 
-from app.config import ASSETS, Config, ConfigError, PROJECT_ROOT
+from app.config import PROJECT_ROOT, ConfigError
 from app.ui.commands import GuiCommands
 from app.ui.scene import LAYERS, SceneLayers
-from app.ui.teleop import MOVE_BINDINGS
 
 log = logging.getLogger(__name__)
 

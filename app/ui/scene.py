@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import viser
 
-from app.ocslam.messages import CLASS_NAMES
 from app.ocslam.se2 import Pose2
 from app.ui.colors import CLASS_COLORS, grid_to_rgb
 
@@ -80,7 +79,7 @@ class _ObjectNodes:
 class SceneLayers:
     """All scene layers of one viser server (shared by every client)."""
 
-    def __init__(self, server: viser.ViserServer, pipeline: "Pipeline") -> None:
+    def __init__(self, server: viser.ViserServer, pipeline: Pipeline) -> None:
         self.server = server
         self.scene = server.scene
         self.pipeline = pipeline

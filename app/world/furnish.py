@@ -236,7 +236,7 @@ class Builder:
                 from shapely import affinity
 
                 polys = [affinity.translate(p, dx, dy) for p in polys]
-                posed = [(l, m, x + dx, y + dy, a) for l, m, x, y, a in posed]
+                posed = [(lab, m, x + dx, y + dy, a) for lab, m, x, y, a in posed]
             group = unary_union(polys)
             if not group.within(zpoly) or group.buffer(-0.01).intersects(self.solid):
                 continue

@@ -38,13 +38,12 @@ def _corridor(rng: np.random.Generator, seed: int) -> Any:
     b = Builder(rng, f"corridor_{seed}", seed,
                  f"corridor + offices (ocslam world random --family corridor --seed {seed}): {L} × {cw} m corridor")
     # corners CCW from (0, y0); edge 0: south, 1: east, 2: north, 3: west; corridor doors at both ends
-    h = y1 - y0
     b.outer([(0.0, y0), (L, y0), (L, y1), (0.0, y1)], {1: [cw / 2 - y0], 3: [y1 - cw / 2]}, windows=3)
     n_off = int(rng.integers(2, 4))
-    cuts = np.sort(rng.uniform(0.3, 0.7, n_off - 1)) if n_off > 1 else np.array([])
-    xs = [0.0] + [round(float(L * (k + c / n_off * 0 + 0) / 1), 1) for k, c in []] + [L]
+    if n_off > 1:
+        rng.uniform(0.3, 0.7, n_off - 1)  # an unused draw, kept so that every corridor world stays the same
     xs = [0.0] + [round(float((k + 1) * L / n_off + rng.uniform(-0.6, 0.6)), 1) for k in range(n_off - 1)] + [L]
-    passages, side_doors = [], []
+    passages = []
     for k in range(n_off):
         a, c = xs[k], xs[k + 1]
         s = float(rng.uniform(a + 0.8, c - 0.8))

@@ -101,7 +101,7 @@ def rooms_world(seed: int, *, n_rooms: int | None = None, extra_objects: int | N
     rooms to split the rectangle into (default 3–5 at random); ``extra_objects``: objects beyond one
     of each class. Deterministic for a seed; ``WorldError`` after 40 failed attempts."""
     rng = np.random.default_rng(seed)
-    for attempt in range(40):
+    for _attempt in range(40):
         w = _try_rooms_world(rng, seed, n_rooms, extra_objects)
         if w is not None:
             try:
@@ -184,7 +184,7 @@ def _try_rooms_world(rng: np.random.Generator, seed: int, n_rooms: int | None, e
         return None
     doorway_points: list[tuple[float, float]] = []
     interior_segments: dict[tuple, list[Opening]] = {}
-    for i, j, e in doorways:
+    for _i, _j, e in doorways:
         kind, c, lo, hi = e
         width = round(float(rng.uniform(0.9, 1.1)), 2)
         s0 = float(rng.uniform(0.35, (hi - lo) - width - 0.35))
@@ -192,7 +192,7 @@ def _try_rooms_world(rng: np.random.Generator, seed: int, n_rooms: int | None, e
         mid = lo + s0 + width / 2
         doorway_points.append((c, mid) if kind == "v" else (mid, c))
     interior_doors: list[tuple[tuple, float]] = []  # (edge, s_mid): closed doors between rooms
-    for i, j, e in edges:
+    for _i, _j, e in edges:
         if e not in interior_segments and rng.random() < 0.5:
             # no doorway here: a closed door (like a closet's), seen from both rooms
             s0 = float(rng.uniform(0.35, (e[3] - e[2]) - 1.0 - 0.35))
@@ -256,7 +256,6 @@ def _try_rooms_world(rng: np.random.Generator, seed: int, n_rooms: int | None, e
         return any(fp.within(r.poly.buffer(-0.08)) for r in rooms)
 
     def place(label: str | None, model: str, room: Room, against_wall: bool, gap: float = 0.5) -> bool:
-        spec = get_model(model)
         scale = 1.0
         fp0 = model_footprint(model, scale)
         depth = float(fp0[:, 0].max())

@@ -161,7 +161,7 @@ def optimize(
     cost = cost0
     lam = 1e-4
     it = 0
-    for it in range(1, iterations + 1):
+    for it in range(1, iterations + 1):  # noqa: B007 (the count is returned)
         Hm, b = linearize(x, ij, z, info, w, e)
         keep = np.ones(3 * K, bool)
         keep[3 * fixed : 3 * fixed + 3] = False

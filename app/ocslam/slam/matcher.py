@@ -301,7 +301,7 @@ def refine(
         prior_info = np.asarray(prior_info, np.float64)
     md2 = max_dist_m * max_dist_m
     r2 = robust_m * robust_m
-    for it in range(1, iterations + 1):
+    for it in range(1, iterations + 1):  # noqa: B007 (the count is returned)
         q, k, e, ok = _associate(fld, pts, x, md2)
         sel = np.flatnonzero(ok)
         if len(sel) < 3:

@@ -4,18 +4,24 @@ One clear view per class, found by trying viewpoints around each object of the a
 random worlds), from its front half (within ±69° of the direction it faces), until the object is a kept label at least 90 % visible with a box side of 18 px or more.
 No domain randomisation, no sensor noise. Boxes in expected.yaml are every kept label of the image.
 """
-import math, sys
+import math
+import sys
 from pathlib import Path
-import cv2, numpy as np, yaml
+
+import cv2
+import numpy as np
+import yaml
+
 from app.config import Config, resolve_path
-from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld
+from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels
 from app.world.format import load_world
 from app.world.generator import random_world
 
-out = Path(sys.argv[1]); out.mkdir(parents=True, exist_ok=True)
+out = Path(sys.argv[1])
+out.mkdir(parents=True, exist_ok=True)
 W, H = 320, 240
 wanted = list(CLASS_NAMES)
 found = {}
@@ -29,7 +35,8 @@ for wname, world in worlds:
             if o.label in found:
                 continue
             for _ in range(80):
-                d = rng.uniform(0.6, 2.8); a = o.yaw + rng.uniform(-1.2, 1.2)  # from the object's front half (models face +x)
+                d = rng.uniform(0.6, 2.8)
+                a = o.yaw + rng.uniform(-1.2, 1.2)  # from the object's front half (models face +x)
                 x, y = o.x + d * math.cos(a), o.y + d * math.sin(a)
                 if not sim.pose_free(x, y):
                     continue

@@ -11,13 +11,13 @@ import math
 
 import numpy as np
 import pytest
+from synthetic_scene import Box, Cylinder, default_camera, detection, detections, raycast, table
 
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.consciousness import Consciousness
 from app.ocslam.messages import CLASS_INDEX, Detection, Detections, LaserScan
 from app.ocslam.presence import initial_presence, update_presence
 from app.ocslam.se2 import Pose2
-from synthetic_scene import Box, Cylinder, default_camera, detection, detections, raycast, table
 
 CAM = default_camera()
 

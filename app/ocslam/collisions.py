@@ -5,7 +5,7 @@ Within one frame between the candidates of its boxes, and after the updates betw
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,7 +17,15 @@ from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint import estimate_footprint, min_area_rect
 from app.ocslam.projection import BoundingArea
-from app.ocslam.tracks import FreeFn, Track, along_ray_close, co_observed, contiguous, merge_tracks, overlap_fraction
+from app.ocslam.tracks import (
+    FreeFn,
+    Track,
+    along_ray_close,
+    co_observed,
+    contiguous,
+    merge_tracks,
+    overlap_fraction,
+)
 
 FloatArray = NDArray[np.float64]
 

@@ -8,10 +8,9 @@ never saw (a sofa seen from the front is as deep as a sofa), positioned where th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -71,7 +70,7 @@ class Footprint:
         dy = max(abs(ly) - self.size_y / 2, 0.0)
         return float(np.hypot(dx, dy))
 
-    def transformed(self, T: Pose2) -> "Footprint":
+    def transformed(self, T: Pose2) -> Footprint:
         c = T.transform_points(self.center[None, :])[0]
         return Footprint(c, float(self.yaw + T.yaw), self.size_x, self.size_y)
 

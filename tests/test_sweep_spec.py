@@ -69,6 +69,8 @@ def test_other_errors():
     assert "a range needs a numeric field" in err(params={"consciousness.mode": {"range": [0, 1]}})
     assert "grid sampler needs a step" in err(sampler="grid")
     assert "set.detector.confidence" in err(set={"detector.confidence": 5.0})
+    assert "never recorded" in err(record_floor=0.5)  # the base's threshold (0.4) is below it
+    assert spec(record_floor=0.2).floor() == 0.2
 
 
 def test_grid_values():

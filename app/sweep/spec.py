@@ -17,6 +17,8 @@
     objective: f1                       # f1 | {metric: precision_at_recall, recall_floor: 0.7}
     trials: 200                         # random/optuna: trials (grid: the grid's size)
     include_defaults: true              # random/optuna: the first trial is the base config's values
+    record_floor: 0.2                   # optional: the detector threshold of the recordings (default: the
+                                        # lowest any trial asks for); ≤ every trial's detector.confidence
     seed: 0
     duration: 1500                      # max sim seconds a world's route is driven (recordings, re-runs)
 
@@ -101,6 +103,7 @@ class Spec:
     seed: int = 0
     duration: float = 1500.0
     include_defaults: bool = True
+    record_floor: float | None = None
     source: str = "spec"
 
     @property
@@ -137,6 +140,8 @@ class Spec:
     def floor(self) -> float:
         """The detector threshold recordings are made at: the lowest any trial asks for (and ≤ the base's)."""
         base = float(self.base_config().detector.confidence)
+        if self.record_floor is not None:
+            return self.record_floor
         for p in self.params:
             if p.path == "detector.confidence":
                 return min(base, float(min(p.values) if p.values is not None else p.low))
@@ -214,7 +219,7 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
     if not isinstance(data, dict):
         raise SpecError(f"{source}: expected a mapping (name, suite, params, sampler, objective, trials)")
     known = {"name", "suite", "only", "config", "set", "params", "sampler", "objective", "trials", "seed", "duration",
-             "include_defaults"}
+             "include_defaults", "record_floor"}
     extra = set(data) - known
     if extra:
         k = sorted(extra)[0]
@@ -259,6 +264,9 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
     inc = data.get("include_defaults", True)
     if not isinstance(inc, bool):
         raise SpecError(f"include_defaults: expected true or false, got {inc!r}")
+    rf = data.get("record_floor")
+    if rf is not None and (isinstance(rf, bool) or not isinstance(rf, (int, float)) or not 0.01 <= rf <= 0.99):
+        raise SpecError(f"record_floor: expected a detector threshold in [0.01, 0.99], got {rf!r}")
     sets = data.get("set") or {}
     if not isinstance(sets, dict):
         raise SpecError(f"set: expected a mapping SECTION.KEY: value, got {sets!r}")
@@ -271,10 +279,15 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
     spec = Spec(name=name, suite=data["suite"], params=plist, only=[str(n) for n in only],
                 config=str(cfg_path) if cfg_path else None, set=dict(sets), sampler=sampler, objective=objective,
                 trials=trials, seed=seed, duration=float(dur), include_defaults=inc,
-                source=source)
+                record_floor=float(rf) if rf is not None else None, source=source)
     if sampler in ("grid", "oat"):
         for p in plist:
             p.grid_values()
+    if rf is not None:
+        lows = [min(p.values) if p.values is not None else p.low for p in plist if p.path == "detector.confidence"]
+        low = min(lows + [float(spec.base_config().detector.confidence)])
+        if low < rf - 1e-12:
+            raise SpecError(f"record_floor: {rf} is above a trial's detector.confidence ({low}): those boxes were never recorded")
     try:
         spec.base_config()
     except Exception as e:

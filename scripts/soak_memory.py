@@ -13,6 +13,7 @@ import collections
 import gc
 import json
 import os
+import sys
 import threading
 import time
 import tracemalloc
@@ -54,7 +55,8 @@ def main() -> None:
         gc.collect()
         rec = {"world": i, "seed": seed, "wall_s": round(time.perf_counter() - t0, 1), "rss_live_mib": round(live, 1),
                "rss_closed_mib": round(rss_mib(children=False), 1), "threads": threading.active_count(),
-               "fds": len(os.listdir("/proc/self/fd")), "maps": sum(1 for _ in open("/proc/self/maps"))}
+               "fds": len(os.listdir("/proc/self/fd")), "maps": sum(1 for _ in open("/proc/self/maps")),
+               "py_blocks": sys.getallocatedblocks()}
         if a.trim and malloc_trim():
             rec["rss_trimmed_mib"] = round(rss_mib(children=False), 1)
         if a.trace:

@@ -5,7 +5,8 @@ replay, because the object map is anchored to its keyframes. Nothing the conscio
 into the SLAM, so for trials that change only consciousness constants (and the detector's confidence
 threshold, see :mod:`app.sweep.suite`) the SLAM's part is the same every time. :func:`build_trace` replays
 the bag once through :class:`~app.ros2.replay.ReplayCore` with ``reuse_detections`` and records, in
-order, what the consciousness would have been handed:
+order, what the consciousness was handed (:class:`app.ros2.slam_trace.RecordingConsciousness` in front of
+it, so the replay's own fusion step decides the calls):
 
 - a :class:`FuseInput` per recorded ``/yolo_boxes`` message: the boxes, the scan nearest the image moved
   to its instant, ``T_map_base`` at the image's stamp, the keyframe ``(k, T_map_kf)``, the occupancy
@@ -100,55 +101,19 @@ class Trace:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def _trace_core_class():
-    from app.ros2.replay import ReplayCore
+def _sweep_events(rec: Any) -> list[FuseInput | Correction]:
+    """The calls :class:`app.ros2.slam_trace.RecordingConsciousness` saw, as this module's events (grids
+    reduced to the three levels the consciousness reads)."""
+    from app.ros2 import slam_trace
 
-    class TraceCore(ReplayCore):
-        """:class:`ReplayCore` whose fusion step records its inputs instead of running the consciousness."""
-
-        events: list[FuseInput | Correction]
-
-        def _fuse(self, dets: Detections) -> None:  # ReplayCore._fuse, improved branch
-            st = self.state
-            c = self.cfg.consciousness
-            stamp = dets.stamp
-            if not len(st.odom_poses):
-                return
-            scan = st.scans.nearest(stamp, c.sync_tolerance_s)
-            if scan is None:
-                return
-            from app.ocslam.sync import reproject_scan
-
-            T_odom_img = st.odom_poses.at(stamp)
-            T_odom_scan = st.odom_poses.at(scan.stamp)
-            if scan.stamp != stamp:
-                scan = reproject_scan(scan, self.T_base_scan, T_odom_img.between(T_odom_scan), stamp)
-            T = self.T_map_odom @ T_odom_img
-            kf = None
-            if self.cfg.slam.enabled:
-                k = st.slam.keyframe_at(stamp)
-                if k is not None:
-                    kf = (k, st.slam.keyframe_pose(k))
-            grid = st.slam.occupancy_grid() if (self.cfg.slam.enabled and c.corner_check) else None
-            last = st.last_fusion_pose
-            moved = last is None or T.distance(last) > 1e-4 or abs(T.yaw - last.yaw) > 1e-4
-            st.last_fusion_pose = T
-            self.events.append(FuseInput(dets, scan, T, stamp, kf, bool(moved),
-                                         CompactGrid.of(grid) if grid is not None else None))
-            st.counters.fused_frames += 1
-
-    return TraceCore
-
-
-class _CorrectionLog:
-    """Stands where the consciousness is during tracing: logs the SLAM corrections it is handed."""
-
-    def __init__(self, core: Any) -> None:
-        self.core = core
-
-    def apply_correction(self, keyframe_pose: Any) -> int:
-        self.core.events.append(Correction(np.array(self.core.state.slam.keyframes.poses.data, dtype=np.float64)))
-        return 0
+    out: list[FuseInput | Correction] = []
+    for e in rec.events:
+        if isinstance(e, slam_trace.Correction):
+            out.append(Correction(e.keyframe_poses))
+        else:
+            grid = CompactGrid.of(rec.grids[e.grid].grid()) if e.grid is not None else None
+            out.append(FuseInput(e.detections, e.scan, e.T_frame_base, e.stamp, e.keyframe, bool(e.robot_moved), grid))
+    return out
 
 
 def open_bag(path: str | Path, cfg: Any):
@@ -165,6 +130,8 @@ def build_trace(bag_path: str | Path, cfg: Any, name: str = "", floor: float = 0
     import time
 
     from app.ros2.errors import BagError
+    from app.ros2.replay import ReplayCore
+    from app.ros2.slam_trace import attach_recorder
 
     if cfg.consciousness.mode != "improved":
         raise BagError("a trace replays the improved mode only (consciousness.mode=seed: full replay)")
@@ -172,21 +139,21 @@ def build_trace(bag_path: str | Path, cfg: Any, name: str = "", floor: float = 0
     cfg.set("replay.snapshot_period_s", 3600.0)  # no seeking here: no snapshots
     bag = open_bag(bag_path, cfg)
     t0 = time.perf_counter()
-    core = _trace_core_class()(cfg, bag, reuse_detections=True)
+    core = ReplayCore(cfg, bag, reuse_detections=True)
     if not core.fusing:
         raise BagError(f"{bag_path}: no recorded boxes and camera_info: nothing to fuse")
     if bag.ground_truth is None:
         raise BagError(f"{bag_path}: no ground truth in the bag: trials cannot be scored")
-    core.events = []
-    core.state.consciousness = _CorrectionLog(core)
+    rec = attach_recorder(core)  # the replay's own fusion step, recorded as it calls the consciousness
     core.run()
+    events = _sweep_events(rec)
     truth, obstacles = bag.ground_truth
-    return Trace(name=name or Path(bag_path).name, events=core.events, camera_model=core.camera_model,
+    return Trace(name=name or Path(bag_path).name, events=events, camera_model=core.camera_model,
                  truth=list(truth), obstacles=list(obstacles), T_map_odom_end=core.T_map_odom,
                  corner_check=bool(cfg.consciousness.corner_check),
                  fixed={k: getattr(cfg.consciousness, k) for k in TRACE_FIXED}, floor=float(floor),
-                 info={"build_s": round(time.perf_counter() - t0, 2), "frames": sum(isinstance(e, FuseInput) for e in core.events),
-                       "corrections": sum(isinstance(e, Correction) for e in core.events),
+                 info={"build_s": round(time.perf_counter() - t0, 2), "frames": sum(isinstance(e, FuseInput) for e in events),
+                       "corrections": sum(isinstance(e, Correction) for e in events),
                        "bag_time_s": round(core.t_end - core.t_start, 2)})
 
 

@@ -89,6 +89,20 @@ def _mount_4x4(T: Pose2, z: float) -> np.ndarray:
     return M
 
 
+
+def object_summary(report: Any) -> dict[str, Any]:
+    """A run summary's object keys from an ``evaluate_objects`` report (empty without one): the whole
+    report under ``objects`` and its headline figures as ``objects_<key>``."""
+    if report is None:
+        return {}
+    d = report.as_dict()
+    out: dict[str, Any] = {"objects": d}
+    for key in ("in_scene", "in_map", "tp", "fn", "precision_strict", "precision_lenient", "recall",
+                "pos_err_mean_m", "pos_err_max_m"):
+        if key in d:
+            out[f"objects_{key}"] = d[key]
+    return out
+
 class ReplayCore:
     """OCSLAM's core driven by a bag. ``detector``: ``"auto"`` (the configured one, when the bag has a
     camera and ``reuse_detections`` is off), ``None``, or a detector object with ``detect(Image)``."""
@@ -436,14 +450,7 @@ class ReplayCore:
                 if ok.any():
                     out["slam_ate_rmse_m"] = float(metrics.ate_rmse(est[ok], true[idx[ok]]))
         if self.fusing:
-            rep = self.object_report()
-            if rep is not None:
-                d = rep.as_dict()
-                out["objects"] = d
-                for key in ("in_scene", "in_map", "tp", "fn", "precision_strict", "precision_lenient", "recall",
-                            "pos_err_mean_m", "pos_err_max_m"):
-                    if key in d:
-                        out[f"objects_{key}"] = d[key]
+            out.update(object_summary(self.object_report()))
         out["stages_s"] = {k: round(v, 3) for k, v in self.timer.items()}
         c = st.counters
         out["counters"] = {"scans": c.scans, "odometry": c.odom, "images": c.images, "detections": c.detections,

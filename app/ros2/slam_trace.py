@@ -355,12 +355,7 @@ class TraceReplay:
         out["real_time_factor"] = round(dur / self.wall_s, 3) if self.wall_s > 0 else None
         out["slam_trace"] = self.trace.key
         out["stages_s"] = {"consciousness": round(self.wall_s, 3)}
-        rep = self.object_report()
-        if rep is not None:
-            d = rep.as_dict()
-            out["objects"] = d
-            for key in ("in_scene", "in_map", "tp", "fn", "precision_strict", "precision_lenient", "recall",
-                        "pos_err_mean_m", "pos_err_max_m"):
-                if key in d:
-                    out[f"objects_{key}"] = d[key]
+        from app.ros2.replay import object_summary
+
+        out.update(object_summary(self.object_report()))
         return out

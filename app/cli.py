@@ -19,6 +19,7 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 #: name → (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -60,27 +61,46 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _selected(argv: Sequence[str] | None) -> tuple[str | None, str | None] | None:
+    """The ``(command, bench)`` that ``argv`` names, or None to load every command (``argv`` None).
+
+    The top-level parser has no options but ``-h``, so the first word that is not an option is the
+    command, and after ``bench`` the next one is the benchmark."""
+    if argv is None:
+        return None
+    words = [a for a in argv if not a.startswith("-")]
+    command = words[0] if words else None
+    bench = words[1] if command == "bench" and len(words) > 1 else None
+    return command, bench
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``ocslam`` parser. With ``argv``, only the sub-command it names imports its module (the
+    others are listed by name and help), so ``ocslam replay …`` does not pay for importing every
+    benchmark's dependencies; without, every command's arguments are built (tests, docs)."""
+    chosen = _selected(argv)
     parser = _Parser(prog="ocslam", description="Object-Conscious SLAM in a simulated apartment.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, (module, help_text) in COMMANDS.items():
+
+    def add(parent: Any, name: str, module: str, help_text: str, wanted: bool, is_bench: bool = False) -> None:
+        if not wanted:
+            parent.add_parser(name, help=help_text)
+            return
         mod = _load(module)
         if mod is None:
-            continue
-        p = sub.add_parser(name, help=help_text, description=(mod.__doc__ or help_text).strip().splitlines()[0])
+            return
+        p = parent.add_parser(name, help=help_text, description=(mod.__doc__ or help_text).strip().splitlines()[0])
         mod.add_arguments(p)
+        if is_bench and not any(a.dest == "json" for a in p._actions):
+            p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
         p.set_defaults(_run=mod.run)
+
+    for name, (module, help_text) in COMMANDS.items():
+        add(sub, name, module, help_text, chosen is None or chosen[0] == name)
     bench = sub.add_parser("bench", help="benchmarks (each prints a table, or JSON with --json)")
     bsub = bench.add_subparsers(dest="bench", metavar="BENCH")
     for name, (module, help_text) in BENCHES.items():
-        mod = _load(module)
-        if mod is None:
-            continue
-        p = bsub.add_parser(name, help=help_text)
-        mod.add_arguments(p)
-        if not any(a.dest == "json" for a in p._actions):
-            p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
-        p.set_defaults(_run=mod.run)
+        add(bsub, name, module, help_text, chosen is None or chosen == ("bench", name), is_bench=True)
     pall = bsub.add_parser("all", help="run every benchmark with its default arguments")
     pall.add_argument("--json", action="store_true")
     pall.add_argument("--quick", action="store_true", help="shorter runs")
@@ -97,7 +117,8 @@ def _bench_all(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     if not hasattr(args, "_run"):
         parser.print_help()

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from app.config import PROJECT_ROOT, Config, ConfigError
-from app.ui.security import PathRefused, confine_path, is_loopback, new_token, safe_message
+from app.ui.confine import PathRefused, confine_path, safe_message
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +45,8 @@ class OcslamApp:
         self.runs_root = project_path(cfg.server.runs_dir)
         #: directories whose worlds the World dropdown offers
         self.worlds_roots = tuple(project_path(d) for d in cfg.server.worlds_dirs)
+        from app.ui.security import is_loopback, new_token
+
         #: access token for a non-loopback host (None: loopback, or --no-token)
         self.token: str | None = (
             new_token() if cfg.server.require_token and not is_loopback(cfg.server.host) else None
@@ -187,7 +189,7 @@ class OcslamApp:
     # commands (called from viser's thread pool)
     # ------------------------------------------------------------------------------------------
     def notify(self, client: Any, title: str, body: str, color: str = "blue") -> None:
-        """A one-line notification (see :func:`app.ui.security.safe_message`) to ``client`` (None: all)."""
+        """A one-line notification (see :func:`app.ui.confine.safe_message`) to ``client`` (None: all)."""
         from app.ui.panels import notify_clients
 
         notify_clients(client, self.server, title, safe_message(body), color)
@@ -523,6 +525,8 @@ def project_path(p: str | Path) -> Path:
 def serve(cfg: Config, *, record: str | None = None) -> int:
     """``ocslam run``: start the web app and block until Ctrl-C. ``record``: a bag folder to record the run
     into (``""``: a new ``recording-<date>`` folder under the runs directory); the bag is finished on exit."""
+    from app.ui.security import is_loopback
+
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     app = OcslamApp(cfg).start()
     if record is not None:

@@ -354,7 +354,7 @@ def _label_of(app, path: Path) -> str:
 
 
 def test_safe_message_unit(tmp_path) -> None:
-    from app.ui.security import safe_message
+    from app.ui.confine import safe_message
 
     f = tmp_path / "w.yaml"
     f.write_text("name: x\n" + SECRET + "\n")
@@ -365,7 +365,7 @@ def test_safe_message_unit(tmp_path) -> None:
 
 
 def test_confine_path_unit(tmp_path) -> None:
-    from app.ui.security import PathRefused, confine_path
+    from app.ui.confine import PathRefused, confine_path
 
     root = tmp_path / "runs"
     root.mkdir()
@@ -387,7 +387,7 @@ def test_confine_path_property(tmp_path_factory) -> None:
     from hypothesis import given, settings
     from hypothesis import strategies as st
 
-    from app.ui.security import PathRefused, confine_path
+    from app.ui.confine import PathRefused, confine_path
 
     base = tmp_path_factory.mktemp("confine")
     root = base / "runs"

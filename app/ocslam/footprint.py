@@ -107,13 +107,15 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
         cs, sn = np.cos(thetas), np.sin(thetas)
         a = q[:, 0][None, :] * cs[:, None] + q[:, 1][None, :] * sn[:, None]  # (K, N)
         b = -q[:, 0][None, :] * sn[:, None] + q[:, 1][None, :] * cs[:, None]
-        area = (a.max(1) - a.min(1)) * (b.max(1) - b.min(1))
-        if np.ptp(q, axis=0).max() < 0.5:
+        a_lo, a_hi = a.min(axis=1, keepdims=True), a.max(axis=1, keepdims=True)
+        b_lo, b_hi = b.min(axis=1, keepdims=True), b.max(axis=1, keepdims=True)
+        area = ((a_hi - a_lo) * (b_hi - b_lo))[:, 0]
+        if (q.max(axis=0) - q.min(axis=0)).max() < 0.5:
             # a small cluster: the outline says little, the minimum-area rectangle follows its line
             th = float(thetas[int(np.argmin(area))])
         else:
-            da = np.minimum(a - a.min(axis=1, keepdims=True), a.max(axis=1, keepdims=True) - a)
-            db = np.minimum(b - b.min(axis=1, keepdims=True), b.max(axis=1, keepdims=True) - b)
+            da = np.minimum(a - a_lo, a_hi - a)
+            db = np.minimum(b - b_lo, b_hi - b)
             score = (1.0 / np.maximum(np.minimum(da, db), 0.01)).sum(axis=1)
             best = np.flatnonzero(score >= score.max() * (1.0 - 1e-6))  # ties: the smaller area
             th = float(thetas[best[np.argmin(area[best])]])

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import FrameReport
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.presence import decay_presence, in_camera_view, occluded_by_scan
+from app.ocslam.presence import centers_in_camera_view, decay_presence, occluded_by_scan
 from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track
@@ -36,26 +36,38 @@ def decay_tracks(
     cfg: ConsciousnessConfig,
     cam: CameraModel,
 ) -> list[Track]:
-    """Ghost decay; returns the tracks that remain (presence > 0)."""
+    """Ghost decay; returns the tracks that remain (presence > 0).
+
+    The per-track tests that need no scan (explained by a box's wedge, in the camera's view) run for
+    every track at once; the occlusion test only for the tracks still missed."""
     T_scan_map = T_map_scan.inverse()
     T_base_map = T_map_base.inverse()
     labels = {a.label for a in areas}
-    keep = []
-    for t in tracks:
-        fp = t.footprint
-        if fp is None or t.touched_stamp == stamp:
-            keep.append(t)
-            continue
+    cand = [i for i, t in enumerate(tracks) if t.footprint is not None and t.touched_stamp != stamp]
+    missed = np.zeros(len(tracks), dtype=bool)
+    if cand:
+        fps = [tracks[i].footprint for i in cand]
+        centers = np.array([fp.center for fp in fps if fp is not None], dtype=np.float64).reshape(-1, 2)
         # explained by a box of its class whose wedge holds it
-        if t.label in labels:
-            c_scan = T_scan_map.transform_points(fp.center[None, :])
-            b, _r = cam.bearing_ranges_scan(c_scan)
-            if any(a.label == t.label and bool(a.contains_bearing(b, margin=0.05)[0]) for a in areas):
-                keep.append(t)
-                continue
-        if not in_camera_view(fp, t.prior.height[1], T_map_base, cam, float(cfg.decay_max_range_m), T_base_frame=T_base_map):
+        explained = np.zeros(len(cand), dtype=bool)
+        boxed = np.array([tracks[i].label in labels for i in cand])
+        if np.any(boxed):
+            b, _r = cam.bearing_ranges_scan(T_scan_map.transform_points(centers[boxed]))
+            held = np.zeros(len(b), dtype=bool)
+            cand_labels = np.array([tracks[i].label for i in cand], dtype=object)[boxed]
+            for a in areas:
+                held |= (cand_labels == a.label) & a.contains_bearing(b, margin=0.05)
+            explained[np.flatnonzero(boxed)] = held
+        heights = np.array([tracks[i].prior.height[1] for i in cand], dtype=np.float64)
+        in_view = centers_in_camera_view(centers, heights, T_base_map, cam, float(cfg.decay_max_range_m))
+        missed[np.asarray(cand)[~explained & in_view]] = True
+    keep = []
+    for i, t in enumerate(tracks):
+        if not missed[i]:
             keep.append(t)
             continue
+        fp = t.footprint
+        assert fp is not None
         if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, float(cfg.occlusion_margin_m)):
             keep.append(t)
             continue

@@ -52,16 +52,32 @@ def in_camera_view(
     and lies within ``max_range_m`` of the camera (horizontally). ``T_base_frame``: ``T_frame_base``'s
     inverse when the caller has it (one per frame, not one per object)."""
     T_bf = T_frame_base.inverse() if T_base_frame is None else T_base_frame
-    c_base = T_bf.transform_points(footprint.center[None, :])[0]
-    z = float(np.clip(0.5 * height_m, 0.02, 1.0))
-    uv, depth = camera.project(np.array([[c_base[0], c_base[1], z]]))
-    if not depth[0] > 0.05:
-        return False
-    u, v = uv[0]
+    return bool(centers_in_camera_view(footprint.center[None, :], np.array([height_m]), T_bf, camera,
+                                       max_range_m, margin_frac)[0])
+
+
+def centers_in_camera_view(
+    centers: FloatArray,
+    heights_m: FloatArray,
+    T_base_frame: Pose2,
+    camera: CameraModel,
+    max_range_m: float,
+    margin_frac: float = 0.08,
+) -> NDArray[np.bool_]:
+    """:func:`in_camera_view` for ``(N, 2)`` object centres in the frame with ``(N,)`` heights at once.
+
+    ``T_base_frame``: the frame's pose in ``base_footprint`` (the inverse of ``T_frame_base``).
+    Returns ``(N,)`` True where the centre is in view."""
+    c_base = T_base_frame.transform_points(centers)
+    z = np.clip(0.5 * np.asarray(heights_m, dtype=np.float64).reshape(-1), 0.02, 1.0)
+    uv, depth = camera.project(np.column_stack([c_base, z]))
     W, H = camera.info.width, camera.info.height
-    if not (margin_frac * W <= u <= (1.0 - margin_frac) * W and 0.0 <= v <= H):
-        return False
-    return float(np.hypot(*(c_base - camera.center_base[:2]))) <= max_range_m
+    with np.errstate(invalid="ignore"):
+        ok = depth > 0.05
+        ok &= (margin_frac * W <= uv[:, 0]) & (uv[:, 0] <= (1.0 - margin_frac) * W)
+        ok &= (0.0 <= uv[:, 1]) & (uv[:, 1] <= H)
+    rel = c_base - camera.center_base[:2][None, :]
+    return ok & (np.hypot(rel[:, 0], rel[:, 1]) <= max_range_m)
 
 
 def occluded_by_scan(

@@ -1,0 +1,63 @@
+"""The camera-view test of ghost decay: known answers, and the batched form against its definition."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from synthetic_scene import default_camera
+
+from app.ocslam.footprint import Footprint
+from app.ocslam.presence import centers_in_camera_view, in_camera_view
+from app.ocslam.se2 import Pose2
+
+CAM = default_camera()
+
+
+def _view(x: float, y: float, height: float = 0.8, max_range: float = 4.0, T_map_base: Pose2 = Pose2(0, 0, 0)) -> bool:
+    return in_camera_view(Footprint(np.array([x, y]), 0.0, 0.3, 0.3), height, T_map_base, CAM, max_range)
+
+
+def test_known_answers():
+    assert _view(2.0, 0.0)                  # straight ahead
+    assert not _view(-2.0, 0.0)             # behind the robot
+    assert not _view(5.0, 0.0)              # beyond the decay range
+    assert not _view(1.0, 2.0)              # far outside the horizontal field of view (±30°)
+    assert not _view(0.01, 0.0)             # at the camera: not in front of it
+    # the robot's pose: an object 2 m along +y of the map is ahead of a robot facing +y
+    assert _view(0.0, 2.0, T_map_base=Pose2(0, 0, np.pi / 2))
+    assert not _view(2.0, 0.0, T_map_base=Pose2(0, 0, np.pi / 2))
+
+
+def test_margin_of_the_image_is_excluded():
+    # a centre projecting into the outer 8 % columns is not "in clear view"
+    half_fov = 0.5 * 1.04
+    edge = 2.0 * np.tan(half_fov * 0.97)
+    assert not _view(2.0, edge)
+    assert _view(2.0, 2.0 * np.tan(half_fov * 0.5))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    pts=st.lists(st.tuples(st.floats(-6, 6), st.floats(-6, 6), st.floats(0.05, 2.5)), min_size=1, max_size=25),
+    pose=st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(-np.pi, np.pi)),
+    max_range=st.floats(0.5, 6.0),
+)
+def test_batch_agrees_with_one_by_one(pts, pose, max_range):
+    T_map_base = Pose2(*pose)
+    centers = np.array([(x, y) for x, y, _ in pts])
+    heights = np.array([h for _, _, h in pts])
+    batch = centers_in_camera_view(centers, heights, T_map_base.inverse(), CAM, max_range)
+    assert batch.tolist() == [_reference(c, h, T_map_base, max_range) for c, h in zip(centers, heights)]
+
+
+def _reference(c, h, T_map_base: Pose2, max_range: float) -> bool:
+    """The definition, one object at a time: its mid-height centre in the inner 84 % of the columns,
+    inside the rows, in front of the camera and within range of it."""
+    cb = T_map_base.inverse().transform_points(np.asarray(c)[None, :])[0]
+    uv, depth = CAM.project(np.array([[cb[0], cb[1], min(max(h / 2, 0.02), 1.0)]]))
+    if not depth[0] > 0.05:
+        return False
+    W, H = CAM.info.width, CAM.info.height
+    u, v = uv[0]
+    return bool(0.08 * W <= u <= 0.92 * W and 0 <= v <= H and np.hypot(*(cb - CAM.center_base[:2])) <= max_range)

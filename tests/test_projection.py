@@ -247,3 +247,26 @@ def test_seed_scan_points_use_strict_camera_angles_and_skip_inf():
     assert np.all(th > a_min) and np.all(th < a_max)
     expected = np.sum((angles > a_min) & (angles < a_max)) - 1
     assert len(pts) == expected
+
+
+_box = st.tuples(st.floats(-50, 700), st.floats(-50, 530), st.floats(-50, 700), st.floats(-50, 530), st.floats(0.1, 1.0))
+
+
+@settings(max_examples=50, deadline=None)
+@given(boxes=st.lists(_box, min_size=0, max_size=8), allow_nan=st.booleans())
+def test_a_frame_of_boxes_gives_the_areas_of_its_boxes_one_by_one(boxes, allow_nan):
+    # bounding_areas computes a frame's boxes together: each area is the one its box gives alone
+    dets = [Detection(x1, y1, x2, y2, 0, c) for x1, y1, x2, y2, c in boxes]
+    if allow_nan and dets:
+        dets.insert(len(dets) // 2, Detection(np.nan, 0, 5, 5, 0, 0.9))
+    together = bounding_areas(Detections(0.0, 640, 480, tuple(dets)), CAM, 3.5)
+    alone = [a for a in (area_from_box(d, CAM, 3.5) for d in dets) if a is not None]
+    assert len(together) == len(alone)
+    for a, b in zip(together, alone):
+        assert a.detection is b.detection
+        assert a.truncated == b.truncated
+        np.testing.assert_allclose([a.bearing_left, a.bearing_right, a.bearing_center, a.near_range_lo, a.near_range_hi],
+                                   [b.bearing_left, b.bearing_right, b.bearing_center, b.near_range_lo, b.near_range_hi],
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(a.box_px, b.box_px)
+        assert a.polygon.equals_exact(b.polygon, 1e-9)

@@ -153,49 +153,69 @@ def area_from_box(
     The polygon starts at ``near_range_lo·(1 − near_tolerance)``. Returns ``None`` for a degenerate
     box (non-finite, or empty after clipping to the image).
     """
+    return _areas_from_boxes([det], camera, max_range_m, bottom_margin_px, edge_margin_px, near_tolerance)[0]
+
+
+def _areas_from_boxes(
+    dets: Sequence[Detection],
+    camera: CameraModel,
+    max_range_m: float,
+    bottom_margin_px: float,
+    edge_margin_px: float,
+    near_tolerance: float,
+) -> list[BoundingArea | None]:
+    """:func:`area_from_box` for every box of a frame, with one camera computation for all of them."""
     W, H = camera.info.width, camera.info.height
-    vals = np.array([det.x1, det.y1, det.x2, det.y2], dtype=np.float64)
-    if not np.all(np.isfinite(vals)):
-        return None
-    x1, x2 = np.clip(sorted((vals[0], vals[2])), 0.0, W)
-    y1, y2 = np.clip(sorted((vals[1], vals[3])), 0.0, H)
-    if x2 - x1 < 1.0 or y2 - y1 < 1.0:
-        return None
-    truncated = {
-        "left": bool(x1 <= edge_margin_px),
-        "right": bool(x2 >= W - edge_margin_px),
-        "top": bool(y1 <= edge_margin_px),
-        "bottom": bool(y2 >= H - edge_margin_px),
-    }
-    xc = 0.5 * (x1 + x2)
-    bearings = camera.column_bearings_scan(np.array([x1, x2, xc]))
-    b_left, b_right, b_center = (float(b) for b in bearings)
-    rows = np.array([[xc, y2], [xc, min(y2 + bottom_margin_px, H)], [xc, max(y2 - bottom_margin_px, 0.0)]])
-    near, near_lo, near_hi = (float(r) for r in camera.ground_ranges(rows))
-    if truncated["bottom"] or not np.isfinite(near_lo):
-        near_lo = 0.0  # the floor contact is not visible: no lower bound
-    near_lo = min(near_lo, max_range_m)
-    apex = camera.apex_scan
-    r_poly = max(near_lo * (1.0 - near_tolerance), 0.0) if np.isfinite(near_lo) else 0.0
-    r_poly = min(r_poly, 0.95 * max_range_m)
-    poly = _wedge_polygon(apex, b_left, b_right, r_poly, max_range_m)
-    direction = np.array([np.cos(b_center), np.sin(b_center)])
-    bis = np.stack([apex, apex + max_range_m * direction])
-    return BoundingArea(
-        detection=det,
-        polygon=poly,
-        apex=apex.copy(),
-        bearing_left=b_left,
-        bearing_right=b_right,
-        bearing_center=b_center,
-        near_range_m=near,
-        near_range_lo=near_lo,
-        near_range_hi=near_hi,
-        far_range_m=float(max_range_m),
-        bisector=bis,
-        truncated=truncated,
-        box_px=np.array([x1, y1, x2, y2], dtype=np.float64),
-    )
+    boxes: list[tuple[int, float, float, float, float]] = []
+    for i, det in enumerate(dets):
+        vals = np.array([det.x1, det.y1, det.x2, det.y2], dtype=np.float64)
+        if not np.all(np.isfinite(vals)):
+            continue
+        x1, x2 = np.clip(sorted((vals[0], vals[2])), 0.0, W)
+        y1, y2 = np.clip(sorted((vals[1], vals[3])), 0.0, H)
+        if x2 - x1 < 1.0 or y2 - y1 < 1.0:
+            continue
+        boxes.append((i, float(x1), float(y1), float(x2), float(y2)))
+    out: list[BoundingArea | None] = [None] * len(dets)
+    if boxes:
+        xs = np.array([[x1, x2, 0.5 * (x1 + x2)] for _d, x1, _y1, x2, _y2 in boxes])
+        bearings = camera.column_bearings_scan(xs.reshape(-1)).reshape(-1, 3)
+        rows = np.array([[[xc, y2], [xc, min(y2 + bottom_margin_px, H)], [xc, max(y2 - bottom_margin_px, 0.0)]]
+                         for (_d, _x1, _y1, _x2, y2), xc in zip(boxes, xs[:, 2])])
+        ranges = camera.ground_ranges(rows.reshape(-1, 2)).reshape(-1, 3)
+        apex = camera.apex_scan
+        for k, (i, x1, y1, x2, y2) in enumerate(boxes):
+            truncated = {
+                "left": bool(x1 <= edge_margin_px),
+                "right": bool(x2 >= W - edge_margin_px),
+                "top": bool(y1 <= edge_margin_px),
+                "bottom": bool(y2 >= H - edge_margin_px),
+            }
+            b_left, b_right, b_center = (float(b) for b in bearings[k])
+            near, near_lo, near_hi = (float(r) for r in ranges[k])
+            if truncated["bottom"] or not np.isfinite(near_lo):
+                near_lo = 0.0  # the floor contact is not visible: no lower bound
+            near_lo = min(near_lo, max_range_m)
+            r_poly = max(near_lo * (1.0 - near_tolerance), 0.0) if np.isfinite(near_lo) else 0.0
+            r_poly = min(r_poly, 0.95 * max_range_m)
+            poly = _wedge_polygon(apex, b_left, b_right, r_poly, max_range_m)
+            direction = np.array([np.cos(b_center), np.sin(b_center)])
+            out[i] = BoundingArea(
+                detection=dets[i],
+                polygon=poly,
+                apex=apex.copy(),
+                bearing_left=b_left,
+                bearing_right=b_right,
+                bearing_center=b_center,
+                near_range_m=near,
+                near_range_lo=near_lo,
+                near_range_hi=near_hi,
+                far_range_m=float(max_range_m),
+                bisector=np.stack([apex, apex + max_range_m * direction]),
+                truncated=truncated,
+                box_px=np.array([x1, y1, x2, y2], dtype=np.float64),
+            )
+    return out
 
 
 def bounding_areas(
@@ -217,9 +237,10 @@ def bounding_areas(
         sx, sy = box_scale(detections, camera.info.width, camera.info.height)
     else:
         boxes = detections
+    scaled = [scale_box(det, sx, sy) for det in boxes]
     out = []
-    for det in boxes:
-        a = area_from_box(scale_box(det, sx, sy), camera, max_range_m, bottom_margin_px, edge_margin_px, near_tolerance)
+    for det, a in zip(boxes, _areas_from_boxes(scaled, camera, max_range_m, bottom_margin_px, edge_margin_px,
+                                               near_tolerance)):
         if a is not None:
             a.detection = det
             out.append(a)

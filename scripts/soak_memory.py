@@ -1,6 +1,6 @@
 """Where the soak's RSS goes at a world change: one pipeline per world (YOLO on, frontier exploration for
 ``--sim`` sim seconds), then after each world's close: this process's RSS, the same after ``malloc_trim(0)``
-(``--trim``), the Python objects by type that grew (``gc.get_objects()``), threads, open files and memory
+(``--trim``) and by kind of mapping, Python's allocator arenas in use, the Python objects by type that grew (``gc.get_objects()``), threads, open files and memory
 mappings, and with ``--trace`` the memory tracemalloc sees and its top growth (slow: several times the run).
 One JSON line per world (docs/benchmarks.md, "Why the RSS steps up at a world change").
 
@@ -22,6 +22,42 @@ from app.bench.soak import malloc_trim, rss_mib
 from app.config import Config
 from app.pipeline import Pipeline
 from app.world.generator import random_world
+
+
+def rss_by_mapping() -> dict[str, float]:
+    """Resident MiB of this process by kind of mapping (/proc/self/smaps): glibc's main ``[heap]``,
+    anonymous mappings (Python's allocator arenas, glibc's other arenas, large blocks), files, others."""
+    out: dict[str, float] = collections.defaultdict(float)
+    kind = "other"
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            head = line.split()
+            if head and "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
+                name = head[5] if len(head) > 5 else ""
+                kind = "heap" if name == "[heap]" else "anon" if not name else "file" if name.startswith("/") else "other"
+            elif head and head[0] == "Rss:":
+                out[kind] += int(head[1]) / 1024
+    return {k: round(v, 1) for k, v in sorted(out.items())}
+
+
+def pymalloc_arenas() -> int:
+    """Python's allocator arenas in use now (``sys._debugmallocstats``'s "arenas allocated current")."""
+    import tempfile
+
+    with tempfile.TemporaryFile(mode="w+") as tmp:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(tmp.fileno(), 2)
+        try:
+            sys._debugmallocstats()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        tmp.seek(0)
+        for line in tmp:
+            if line.startswith("# arenas allocated current"):
+                return int(line.split("=")[1].replace(",", ""))
+    return -1
 
 
 def main() -> None:
@@ -59,6 +95,8 @@ def main() -> None:
                "py_blocks": sys.getallocatedblocks()}
         if a.trim and malloc_trim():
             rec["rss_trimmed_mib"] = round(rss_mib(children=False), 1)
+        rec["rss_by_mapping_mib"] = rss_by_mapping()
+        rec["pymalloc_arenas"] = pymalloc_arenas()
         if a.trace:
             rec["traced_mib"] = round(tracemalloc.get_traced_memory()[0] / 2**20, 1)
             snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])

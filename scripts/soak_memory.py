@@ -40,6 +40,81 @@ def rss_by_mapping() -> dict[str, float]:
     return {k: round(v, 1) for k, v in sorted(out.items())}
 
 
+def largest_anonymous(n: int = 8) -> list[tuple[int, float]]:
+    """The ``n`` anonymous mappings with the most resident memory: ``(size KiB, resident MiB)``
+    (8 MiB + 4 KiB: a thread stack, kept in glibc's stack cache after its thread ended; 64 MiB: a glibc
+    malloc arena of another thread; 1 MiB: Python's allocator arenas)."""
+    maps: list[tuple[int, float]] = []
+    size, anon = 0, False
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            head = line.split()
+            if head and "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
+                lo, hi = (int(x, 16) for x in head[0].split("-"))
+                size, anon = (hi - lo) // 1024, len(head) <= 5
+            elif head and head[0] == "Rss:" and anon:
+                maps.append((size, round(int(head[1]) / 1024, 1)))
+    return sorted(maps, key=lambda m: -m[1])[:n]
+
+
+def large_arrays(min_mib: float = 1.0) -> list[str]:
+    """numpy arrays of at least ``min_mib`` still reachable from the loaded modules after a world closed,
+    each with the path that reaches it. A crawl from ``sys.modules`` through every referent, because a dict
+    that holds only arrays is not tracked by the garbage collector (``gc.get_objects`` misses it)."""
+    import numpy as np
+
+    found: list[tuple[int, str]] = []
+    seen: set[int] = set()
+    queue = collections.deque((m, f"sys.modules[{n!r}]") for n, m in list(sys.modules.items()) if m is not None)
+    while queue:
+        o, path = queue.popleft()
+        if id(o) in seen:
+            continue
+        seen.add(id(o))
+        if isinstance(o, np.ndarray):
+            if o.base is None and o.nbytes >= min_mib * 2**20:
+                found.append((o.nbytes, f"{o.nbytes / 2**20:.1f} MiB {o.dtype}{list(o.shape)} at {path}"))
+            continue
+        if isinstance(o, (str, bytes, int, float, type(None))):
+            continue
+        if isinstance(o, dict):
+            items = [(v, f"{path}[{k!r}]" if isinstance(k, (str, int)) else f"{path}[…]") for k, v in o.items()]
+        else:
+            items = [(r, f"{path}.{type(r).__name__}") for r in gc.get_referents(o)]
+        if len(path) < 400:
+            queue.extend(items)
+    return [t for _n, t in sorted(found, reverse=True)[:12]]
+
+
+def peek_anonymous(min_kib: int = 4000, n: int = 6) -> list[str]:
+    """What the largest resident anonymous mappings hold: size, and their bytes read as float64/uint8
+    statistics (a grid, an image, …), to tell whose memory they are."""
+    import numpy as np
+
+    out = []
+    regions = []
+    with open("/proc/self/smaps") as f:
+        cur = None
+        for line in f:
+            head = line.split()
+            if head and "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
+                lo, hi = (int(x, 16) for x in head[0].split("-"))
+                cur = (lo, hi) if len(head) <= 5 and (hi - lo) // 1024 >= min_kib else None
+            elif head and head[0] == "Rss:" and cur is not None:
+                regions.append((int(head[1]), cur))
+    with open("/proc/self/mem", "rb") as mem:
+        for rss, (lo, hi) in sorted(regions, reverse=True)[:n]:
+            mem.seek(lo)
+            raw = mem.read(min(hi - lo, 1 << 22))
+            b = np.frombuffer(raw, np.uint8)
+            f64 = np.frombuffer(raw[: len(raw) // 8 * 8], np.float64)
+            fin = f64[np.isfinite(f64) & (np.abs(f64) < 1e6)]
+            out.append(f"{(hi - lo) // 1024} KiB ({rss / 1024:.1f} resident): zeros {np.mean(b == 0):.2f}, "
+                       f"uint8 mean {b.mean():.0f}, float64 plausible {len(fin) / max(len(f64), 1):.2f} "
+                       f"(median {np.median(fin) if len(fin) else float('nan'):.3g}), head {raw[16:48].hex()}")
+    return out
+
+
 def pymalloc_arenas() -> int:
     """Python's allocator arenas in use now (``sys._debugmallocstats``'s "arenas allocated current")."""
     import tempfile
@@ -68,8 +143,11 @@ def main() -> None:
     ap.add_argument("--same", action="store_true", help="the same world every time")
     ap.add_argument("--trim", action="store_true", help="malloc_trim(0) after every world, and its RSS")
     ap.add_argument("--trace", action="store_true", help="tracemalloc (slow)")
+    ap.add_argument("--arrays", action="store_true", help="list the large numpy arrays still held after each world")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="config override (e.g. detector.kind=none to leave the detector out)")
     a = ap.parse_args()
-    cfg = Config.load(None, ["detector.kind=yolo"])
+    cfg = Config.load(None, ["detector.kind=yolo", *a.overrides])
 
     def types() -> collections.Counter:
         return collections.Counter(type(o).__name__ for o in gc.get_objects())
@@ -97,6 +175,10 @@ def main() -> None:
             rec["rss_trimmed_mib"] = round(rss_mib(children=False), 1)
         rec["rss_by_mapping_mib"] = rss_by_mapping()
         rec["pymalloc_arenas"] = pymalloc_arenas()
+        rec["largest_anonymous"] = largest_anonymous()
+        if a.arrays:
+            rec["large_arrays"] = large_arrays()
+            rec["anonymous_contents"] = peek_anonymous()
         if a.trace:
             rec["traced_mib"] = round(tracemalloc.get_traced_memory()[0] / 2**20, 1)
             snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])

@@ -22,15 +22,27 @@ pytestmark = pytest.mark.slow  # one 10 s headless run with the YOLO detector, s
 DURATION = 10.0
 
 
-@pytest.fixture(scope="module")
-def run_dir(tmp_path_factory) -> Path:
+def _record(tmp_path_factory, *overrides: str) -> Path:
     from app.commands.run import run_headless
 
     out = tmp_path_factory.mktemp("rec") / "run"
-    cfg = Config()
+    cfg = Config.load(None, list(overrides))
     cfg.set("camera.async_render", False)  # no render process: same data, fewer processes in the test
     assert run_headless(cfg, duration=DURATION, out=out, quiet=True, record="") == 0
     return out
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    """The default recording (JPEG camera frames)."""
+    return _record(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def png_run_dir(tmp_path_factory) -> Path:
+    """A lossless recording: the detector re-run sees the live run's pixels (with JPEG it cannot:
+    docs/ros2.md, known limits)."""
+    return _record(tmp_path_factory, "replay.record_image_format=png")
 
 
 @pytest.fixture(scope="module")
@@ -157,9 +169,14 @@ def _objects(path: Path):
     return out, d["presence_threshold"]
 
 
-@pytest.mark.parametrize("reuse", [True, False], ids=["reuse-detections", "detector"])
-def test_replay_reproduces_the_live_run(run_dir, reuse):
+@pytest.mark.parametrize("reuse", [True, False], ids=["reuse-detections", "detector-on-png-frames"])
+def test_replay_reproduces_the_live_run(run_dir, png_run_dir, reuse):
+    run_dir = run_dir if reuse else png_run_dir
     cfg = Config.load(run_dir / "config.yaml")
+    with AnyReader([run_dir / "bag"]) as r:
+        con = [c for c in r.connections if c.topic == "/camera/image_raw/compressed"]
+        fmt = r.deserialize(next(r.messages(connections=con))[2], con[0].msgtype).format
+    assert ("jpeg" if reuse else "png") in fmt
     core = ReplayCore(cfg, read_bag(run_dir / "bag", with_images=not reuse), reuse_detections=reuse)
     assert core.fusing and core.extrinsic_source == "/tf_static"
     core.run()

@@ -84,7 +84,8 @@ def _hull_angles(p: FloatArray) -> FloatArray:
     e = e[np.hypot(e[:, 0], e[:, 1]) > 1e-6]
     if len(e) == 0:
         return np.array([0.0])
-    return np.unique(np.round(np.arctan2(e[:, 1], e[:, 0]) % (np.pi / 2), 9))
+    a = np.sort(np.round(np.arctan2(e[:, 1], e[:, 0]) % (np.pi / 2), 9))
+    return a[np.concatenate(([True], a[1:] != a[:-1]))]  # np.unique's result, without its overhead
 
 
 def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:

@@ -186,6 +186,9 @@ def main() -> None:
                 rec["traced_growth"] = [f"{st.size_diff / 1024:+.0f} KiB {st.traceback[0].filename}:{st.traceback[0].lineno}"
                                         for st in snap.compare_to(prev_snap, "lineno")[:6]]
             prev_snap = snap
+            large = sorted((t for t in snap.traces if t.size >= 512 * 1024), key=lambda t: -t.size)
+            rec["traced_large"] = [f"{t.size / 2**20:.1f} MiB {t.traceback[-1].filename}:{t.traceback[-1].lineno}"
+                                   for t in large[:8]]  # blocks Python or numpy allocated and still hold
         t = types()
         rec["objects_grown"] = (t - prev_types).most_common(6)
         prev_types = t

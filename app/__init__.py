@@ -9,3 +9,9 @@ __version__ = "0.1.0"
 # ~/.cache/Microsoft/DeveloperTools/.onnxruntime/ unless this is set *before* onnxruntime is
 # imported; onnxruntime.disable_telemetry_events() stops neither. Every `app` import comes first.
 _os.environ["ORT_DISABLE_TELEMETRY"] = "1"
+
+# One glibc malloc arena (app/memory.py): the loop's stage threads end with their pipeline, and the
+# arenas glibc gives them keep a large world's working set resident for good. Before any thread starts.
+from app.memory import limit_malloc_arenas as _limit_malloc_arenas  # noqa: E402
+
+_limit_malloc_arenas(1)

@@ -18,8 +18,9 @@ import threading
 import time
 import tracemalloc
 
-from app.bench.soak import malloc_trim, rss_mib
+from app.bench.soak import rss_mib
 from app.config import Config
+from app.memory import malloc_trim
 from app.pipeline import Pipeline
 from app.world.generator import random_world
 

@@ -60,7 +60,8 @@ def test_malloc_trim_hands_freed_heap_pages_back() -> None:
     ``malloc_trim``: the mechanism behind the RSS step at a world change."""
     code = textwrap.dedent("""
         import json
-        from app.bench.soak import malloc_trim, rss_mib
+        from app.bench.soak import rss_mib
+        from app.memory import malloc_trim
         blocks = [b"\\x01" * 65536 for _ in range(1600)]   # 100 MiB in heap-sized blocks, pages touched
         keep = blocks[::16]                                # a live block every 1 MiB pins the heap
         del blocks

@@ -36,6 +36,7 @@ from typing import Any
 
 from app.bench.common import print_json, table
 from app.commands.run import add_config_arguments, config_from_args
+from app.memory import malloc_trim
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -165,25 +166,6 @@ def soak_world(cfg, seed: int, *, sim_budget_s: float, warmup_s: float, deadline
         res["rss_trimmed_main_mib"] = round(rss_mib(children=False), 1)
     res["partial"] = False
     return res
-
-
-def malloc_trim() -> bool:
-    """Hand the C heap's free pages back to the OS (glibc ``malloc_trim(0)``); False where there is no glibc.
-
-    A closed pipeline's memory is freed but stays resident: glibc keeps freed heap pages below live
-    blocks, and after the first world frees its large blocks it serves later large blocks from the heap
-    too (its dynamic mmap threshold), so the RSS after a world change stays at the world's peak."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        fn = libc.malloc_trim
-    except (OSError, AttributeError):
-        return False
-    fn.argtypes, fn.restype = [ctypes.c_size_t], ctypes.c_int
-    fn(0)
-    return True
 
 
 def soak(cfg, *, sim_hours: float, world_minutes: float, warmup_s: float, seed0: int,

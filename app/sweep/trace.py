@@ -32,6 +32,7 @@ import numpy as np
 
 from app.ocslam.messages import Detections, GroundTruthObject, GroundTruthObstacle, LaserScan, OccupancyGrid
 from app.ocslam.se2 import Pose2
+from app.ros2.slam_trace import Correction
 
 #: consciousness fields a trace fixes (changing them needs the full replay)
 TRACE_FIXED = ("mode", "sync_tolerance_s")
@@ -74,18 +75,6 @@ class FuseInput:
 
 
 @dataclass
-class Correction:
-    """A SLAM correction: ``(K, 3)`` every keyframe's corrected ``T_map_kf``."""
-
-    keyframe_poses: np.ndarray
-
-    def pose(self, k: int) -> Pose2:
-        if k < 0:
-            raise IndexError(k)
-        return Pose2.from_array(self.keyframe_poses[k])
-
-
-@dataclass
 class Trace:
     """Everything a trial needs from one recording (picklable; travels through Ray's object store)."""
 
@@ -104,12 +93,10 @@ class Trace:
 def _sweep_events(rec: Any) -> list[FuseInput | Correction]:
     """The calls :class:`app.ros2.slam_trace.RecordingConsciousness` saw, as this module's events (grids
     reduced to the three levels the consciousness reads)."""
-    from app.ros2 import slam_trace
-
     out: list[FuseInput | Correction] = []
     for e in rec.events:
-        if isinstance(e, slam_trace.Correction):
-            out.append(Correction(e.keyframe_poses))
+        if isinstance(e, Correction):
+            out.append(e)
         else:
             grid = CompactGrid.of(rec.grids[e.grid].grid()) if e.grid is not None else None
             out.append(FuseInput(e.detections, e.scan, e.T_frame_base, e.stamp, e.keyframe, bool(e.robot_moved), grid))

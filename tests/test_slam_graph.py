@@ -80,3 +80,27 @@ def test_agrees_with_scipy_least_squares():
     ref = np.vstack([init[:1], ls.x.reshape(-1, 3)])
     assert np.allclose(res.poses[:, :2], ref[:, :2], atol=1e-6)
     assert np.allclose(wrap_angle(res.poses[:, 2] - ref[:, 2]), 0, atol=1e-6)
+
+
+def test_factor_spd_solves_like_a_dense_solve_and_refuses_a_singular_matrix():
+    import pytest
+    import scipy.sparse as sp
+
+    from app.ocslam.slam.graph import factor_spd
+
+    rng = np.random.default_rng(3)
+    # a sparse SPD matrix with a chain-plus-loops pattern, like a pose graph's normal equations
+    n = 60
+    A = sp.lil_matrix((n, n))
+    for i in range(n - 1):
+        A[i, i + 1] = A[i + 1, i] = -1.0
+    for i, j in rng.integers(0, n, (10, 2)):
+        if i != j:
+            A[i, j] = A[j, i] = -0.5
+    A = A.tocsr()
+    A = A + sp.diags(np.abs(A).sum(axis=1).A1 + 0.1)
+    b = rng.normal(size=n)
+    np.testing.assert_allclose(factor_spd(A).solve(b), np.linalg.solve(A.toarray(), b), atol=1e-10)
+    S = sp.csr_matrix(np.diag([1.0, 2.0, 0.0]))
+    with pytest.raises(RuntimeError):
+        factor_spd(S)

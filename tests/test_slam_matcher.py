@@ -77,3 +77,15 @@ def test_compose_consistency_of_scan_frame():
     res = correlative_search(FIELD, pts, compose(TRUTH0.as_array(), [0.1, -0.1, 0.05]), 0.3, 0.3, np.radians(1.0))
     ref = refine(FIELD, pts, res.pose)
     assert np.allclose(ref.pose, TRUTH0.as_array(), atol=2e-3)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-3, 3), min_size=9, max_size=9), st.lists(st.floats(-10, 10), min_size=3, max_size=3))
+def test_solve3_matches_numpy_on_symmetric_positive_definite_systems(m, g):
+    from app.ocslam.slam.matcher import _solve3
+
+    M = np.array(m).reshape(3, 3)
+    A = M @ M.T + 0.5 * np.eye(3)  # symmetric positive definite, condition bounded
+    b = np.array(g)
+    np.testing.assert_allclose(_solve3(A, b), -np.linalg.solve(A + 1e-9 * np.eye(3), b), rtol=1e-7, atol=1e-9)
+    assert _solve3(-1e-9 * np.eye(3), b) is None  # exactly singular after the 1e-9 ridge

@@ -187,14 +187,16 @@ class SlamConfig:
     match_yaw_step_rad: float = param(0.0175, min=0.001, max=0.2, unit="rad", help="correlative search yaw step")
     match_min_score: float = param(0.25, min=0.0, max=1.0, help="below this the scan keeps the odometry prediction")
     match_direct_min_inliers: float = param(
-        1.0, min=0.0, max=1.0, help="<1: skip the correlative search if a refinement from the prediction fits this well"
+        0.8, min=0.0, max=1.0, help="<1: skip the correlative search if a refinement from the prediction fits this well"
     )
     match_point_weight: float = param(
         0.1, min=0.0, max=10.0, help="point-to-point weight where the map has no clean line (corners, sparse points)"
     )
     match_robust_m: float = param(0.03, min=0.001, max=1.0, unit="m", help="Cauchy scale of the refinement")
     prior_sigma_xy_m: float = param(0.1, min=0.001, max=10.0, unit="m", help="odometry prior σ per scan (xy)")
-    prior_sigma_yaw_rad: float = param(0.1, min=0.001, max=10.0, unit="rad", help="odometry prior σ per scan (yaw)")
+    prior_sigma_yaw_rad: float = param(
+        0.3, min=0.001, max=10.0, unit="rad", help="odometry prior σ per scan (yaw; weak: the scan decides the heading)"
+    )
     local_map_keyframes: int = param(30, min=1, max=1000, help="keyframes in the local map scans are matched against")
     local_map_half_size_m: float = param(12.0, min=1.0, max=200.0, unit="m", help="local map crop around the robot")
     edge_sigma_xy_m: float = param(0.02, min=0.0001, max=10.0, unit="m", help="σ of a sequential edge (xy)")

@@ -3,7 +3,8 @@
 Built from ``(M, 2)`` map points (the returns of a few keyframes, in one frame ``F``):
 
 - ``score``: ``(H, W)`` likelihood field ``exp(-d² / 2σ²)`` where ``d`` is the distance from the cell to the
-  nearest occupied cell (OpenCV distance transform). The correlative matcher sums it over a scan.
+  nearest occupied cell (OpenCV distance transform), computed on first use. The correlative matcher
+  sums it over a scan.
 - ``pyramid``: max-pooled copies of ``score`` for branch-and-bound (level ``h`` holds, at cell
   ``(i, j)``, the max of ``score`` over ``[i, i+2^h) × [j, j+2^h)``: an upper bound for any finer pose).
 - ``nearest``: for every cell, the index of the nearest occupied cell's mean point ``points`` and the
@@ -22,20 +23,38 @@ from numpy.typing import NDArray
 
 @dataclass
 class MatchField:
-    """Matching structures in frame ``F``: see the module docstring. Grids have a zero border of 1 cell."""
+    """Matching structures in frame ``F``: see the module docstring. Grids have a zero border of 1 cell.
+
+    ``score`` is computed on first use from ``dist_cells`` (the direct refinement of the front end never
+    needs it, only the correlative search and the loop tests do).
+    """
 
     resolution: float
     origin_xy: NDArray[np.float64]  # (2,) map position of cell (0, 0)'s corner
-    score: NDArray[np.float32]  # (H, W)
+    dist_cells: NDArray[np.float32]  # (H, W) distance to the nearest occupied cell, in cells
+    sigma_m: float  # width of the likelihood
     nearest: NDArray[np.int32]  # (H, W) index into points/normals, -1 where there is no point
     points: NDArray[np.float64]  # (P, 2) mean point of each occupied cell, frame F
     normals: NDArray[np.float64]  # (P, 2) unit normals
     linearity: NDArray[np.float64]  # (P,) 1 - λmin/λmax of the neighbourhood (1: a clean line)
     pyramid: list[NDArray[np.float32]] = field(default_factory=list)
+    _score: NDArray[np.float32] | None = field(default=None, repr=False)
+
+    @property
+    def score(self) -> NDArray[np.float32]:
+        """``(H, W)`` likelihood ``exp(-d² / 2σ²)``, zero on the border."""
+        if self._score is None:
+            d_m = self.dist_cells * np.float32(self.resolution)
+            sc = np.exp(-0.5 * (d_m / np.float32(self.sigma_m)) ** 2).astype(np.float32)
+            # zero border so clipped out-of-range lookups score nothing
+            sc[0, :] = sc[-1, :] = 0.0
+            sc[:, 0] = sc[:, -1] = 0.0
+            self._score = sc
+        return self._score
 
     @property
     def shape(self) -> tuple[int, int]:
-        return (int(self.score.shape[0]), int(self.score.shape[1]))
+        return (int(self.nearest.shape[0]), int(self.nearest.shape[1]))
 
     def to_cells(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """``(N, 2)`` points in ``F`` → continuous ``(u_x, u_y)`` cell coordinates."""
@@ -127,17 +146,14 @@ def build_field(
     lut = np.full(int(labels.max()) + 1, -1, np.int32)
     lut[lab_of_cell] = np.arange(len(cells), dtype=np.int32)
     nearest = lut[labels]
-    d_m = dist * np.float32(res)
-    score = np.exp(-0.5 * (d_m / np.float32(sigma_m)) ** 2).astype(np.float32)
-    # zero border so clipped out-of-range lookups score nothing and find no neighbour
-    score[0, :] = score[-1, :] = 0.0
-    score[:, 0] = score[:, -1] = 0.0
+    # zero border so clipped out-of-range lookups find no neighbour
     nearest[0, :] = nearest[-1, :] = -1
     nearest[:, 0] = nearest[:, -1] = -1
     return MatchField(
         resolution=res,
         origin_xy=lo,
-        score=score,
+        dist_cells=np.asarray(dist, np.float32),
+        sigma_m=float(sigma_m),
         nearest=nearest,
         points=mean + lo,
         normals=normals,

@@ -93,8 +93,8 @@ class Slam:
             return "bad_angles"
         if np.isnan(r).any():
             return "nan_range"
-        if (r < 0).any():
-            return "negative_range"
+        if (np.isfinite(r) & (r < 0)).any():
+            return "negative_range"  # -inf is REP-117's "too close to measure": a valid beam without a return
         if self._beams is not None and len(r) != self._beams:
             return "wrong_length"
         return None
@@ -109,7 +109,8 @@ class Slam:
         rr = np.where(hit, r, cfg.free_clear_range_m)
         ends_scan = np.stack([rr * np.cos(a), rr * np.sin(a)], axis=1)
         ends = self.T_base_scan.transform_points(ends_scan)
-        keep = hit | (cfg.free_clear_range_m > 0)
+        # a beam with something closer than range_min (-inf, REP-117) clears nothing
+        keep = hit | ((cfg.free_clear_range_m > 0) & ~(r < scan.range_min))
         return KeyframeScan(
             points=ends[hit],
             ends=ends[keep],

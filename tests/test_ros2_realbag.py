@@ -46,7 +46,6 @@ def reference_figures() -> tuple[float, float]:
 def replay() -> ReplayCore:
     cfg = Config()
     cfg.set("replay.T_base_scan", T_BASE_SCAN)
-    cfg.set("slam.free_clear_range_m", 0.0)  # a third of this LIDAR's beams have no return: they clear nothing
     bag = read_bag(BAG)
     core = ReplayCore(cfg, bag)
     core.run()
@@ -76,7 +75,6 @@ def test_map_agrees_with_the_bags_gridmap(replay):
 def test_ignoring_the_upside_down_mount_breaks_the_map(replay):
     cfg = Config()
     cfg.set("replay.T_base_scan", [0.2, 0.0, 0.0, 0.0, 0.0, 0.0])  # level: the scan is not mirrored
-    cfg.set("slam.free_clear_range_m", 0.0)
     bag = read_bag(BAG)
     bag.events = [e for e in bag.events if e.t <= bag.events[0].t + 30.0]
     wrong = ReplayCore(cfg, bag)

@@ -150,3 +150,30 @@ def test_too_close_beams_keep_the_scan_and_clear_nothing():
     geo = slam._scan_geometry(_bad(good, ranges=r))
     assert len(geo.points) == np.count_nonzero(np.isfinite(r) & (r >= good.range_min) & (r < good.range_max))
     assert len(geo.ends) == len(r) - 40  # the -inf beams clear nothing
+
+
+def test_a_dropout_on_a_wall_clears_only_up_to_the_wall():
+    """No-return beams among returns from a wall 2 m away are dropouts (a cheap LIDAR misses beams on dark
+    or glossy surfaces): they clear up to just before the wall, not 3 m through it. A no-return beam
+    with no return near it (open space beyond the range) still clears ``free_clear_range_m``."""
+    cfg = SlamConfig()
+    slam = Slam(cfg)
+    n = 360
+    inc = 2 * np.pi / n
+    r = np.full(n, np.inf)
+    r[:90] = 2.0  # a wall in front of the first quarter of the beams
+    r[40:43] = np.inf  # three dropouts on it
+    hit = np.isfinite(r)
+    clear = slam._clear_ranges(r, hit, inc)
+    assert np.all(clear[40:43] <= 2.0 - 2 * cfg.resolution_m + 1e-9)
+    assert clear[200] == cfg.free_clear_range_m  # open space, no return within 5°
+    assert clear[92] < 2.0 and clear[100] == cfg.free_clear_range_m  # next to the wall's end, then open
+    # the circle wraps: beam n-1 is next to beam 0 (on the wall)
+    assert clear[n - 1] < 2.0
+    # the whole scan: the dropouts' ends stop short of the wall
+    scan = simulate_scan(Pose2(2.0, 2.0, 0.0), SEGS, stamp=0.0)
+    rr = scan.ranges.copy()
+    rr[10:13] = np.inf
+    geo = slam._scan_geometry(dataclasses.replace(scan, ranges=rr))
+    assert len(geo.ends) == len(rr)
+    assert np.all(np.hypot(*geo.ends[~geo.hit].T) < scan.range_max)

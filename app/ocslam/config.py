@@ -170,6 +170,10 @@ class SlamConfig:
     free_clear_range_m: float = param(
         3.0, min=0.0, max=100.0, unit="m", help="inf/max-range beams clear free space up to this distance"
     )
+    free_clear_dropout_window_deg: float = param(
+        5.0, min=0.0, max=45.0, unit="deg",
+        help="a no-return beam with returns within ±this clears only up to just before the nearest of them (a dropout, not open space; 0: off)",
+    )
     log_odds_hit: float = param(0.85, min=0.01, max=5.0, help="log-odds added to a hit cell")
     log_odds_miss: float = param(-0.4, min=-5.0, max=-0.01, help="log-odds added to a traversed cell")
     log_odds_clamp: float = param(5.0, min=0.5, max=50.0, help="log-odds are clamped to ±this")

@@ -10,6 +10,7 @@ from app.ocslam.config import SlamConfig
 from app.ocslam.messages import LaserScan
 from app.ocslam.se2 import Pose2, wrap_angle
 from app.ocslam.slam import Slam
+from app.ocslam.slam.scan_input import clear_ranges
 from app.ocslam.slam.synthetic import room_world, simulate_scan
 
 SEGS = room_world()
@@ -164,7 +165,7 @@ def test_a_dropout_on_a_wall_clears_only_up_to_the_wall():
     r[:90] = 2.0  # a wall in front of the first quarter of the beams
     r[40:43] = np.inf  # three dropouts on it
     hit = np.isfinite(r)
-    clear = slam._clear_ranges(r, hit, inc)
+    clear = clear_ranges(r, hit, inc, cfg)
     assert np.all(clear[40:43] <= 2.0 - 2 * cfg.resolution_m + 1e-9)
     assert clear[200] == cfg.free_clear_range_m  # open space, no return within 5°
     assert clear[92] < 2.0 and clear[100] == cfg.free_clear_range_m  # next to the wall's end, then open

@@ -37,6 +37,7 @@ from app.ocslam.slam.information import odometry_information, scan_information
 from app.ocslam.slam.keyframes import Growable, Keyframes, KeyframeScan, Trajectory
 from app.ocslam.slam.loop import LoopCloser
 from app.ocslam.slam.matcher import RefineResult, correlative_search, line_hessian, refine
+from app.ocslam.slam.scan_input import check_scan, scan_geometry
 from app.ocslam.slam.verify import Candidate, LoopVerifier
 
 
@@ -80,65 +81,10 @@ class Slam:
     # input
     # ------------------------------------------------------------------------------------------
     def _check(self, scan: LaserScan, odom: NDArray[np.float64]) -> str | None:
-        r = np.asarray(scan.ranges, dtype=np.float64).reshape(-1)
-        if not math.isfinite(scan.stamp):
-            return "nonfinite_stamp"
-        if scan.stamp <= self._last_stamp:
-            return "stamp_not_increasing"
-        if not np.all(np.isfinite(odom)):
-            return "nonfinite_odometry"
-        if len(r) == 0:
-            return "empty"
-        if not (math.isfinite(scan.angle_min) and math.isfinite(scan.angle_increment)):
-            return "bad_angles"
-        if np.isnan(r).any():
-            return "nan_range"
-        if (np.isfinite(r) & (r < 0)).any():
-            return "negative_range"  # -inf is REP-117's "too close to measure": a valid beam without a return
-        if self._beams is not None and len(r) != self._beams:
-            return "wrong_length"
-        return None
+        return check_scan(scan, odom, self._last_stamp, self._beams)
 
     def _scan_geometry(self, scan: LaserScan) -> KeyframeScan:
-        """Returns and beam ends in the base frame."""
-        cfg = self.cfg
-        r = np.asarray(scan.ranges, dtype=np.float64).reshape(-1)
-        a = scan.angles
-        with np.errstate(invalid="ignore"):
-            hit = np.isfinite(r) & (r >= scan.range_min) & (r < scan.range_max) & (r <= cfg.max_range_m)
-        clear = self._clear_ranges(r, hit, float(scan.angle_increment))
-        rr = np.where(hit, r, clear)
-        ends_scan = np.stack([rr * np.cos(a), rr * np.sin(a)], axis=1)
-        ends = self.T_base_scan.transform_points(ends_scan)
-        # a beam with something closer than range_min (-inf, REP-117) clears nothing
-        keep = hit | ((clear > 0) & ~(r < scan.range_min))
-        return KeyframeScan(
-            points=ends[hit],
-            ends=ends[keep],
-            hit=hit[keep],
-            sensor=np.array([self.T_base_scan.x, self.T_base_scan.y]),
-        )
-
-    def _clear_ranges(self, r: NDArray[np.float64], hit: NDArray[np.bool_], increment: float) -> NDArray[np.float64]:
-        """``(N,)`` distance each no-return beam clears: ``free_clear_range_m``, but where a return lies within
-        ``±free_clear_dropout_window_deg`` the beam is a dropout on that surface (dark, glossy, grazing: a
-        cheap LIDAR misses a third of its beams on some walls) rather than open space, and it clears only
-        up to two cells before the nearest such return, never through the wall behind it."""
-        cfg = self.cfg
-        n = len(r)
-        clear = np.full(n, cfg.free_clear_range_m)
-        inc = abs(increment)
-        if cfg.free_clear_range_m <= 0 or cfg.free_clear_dropout_window_deg <= 0 or inc <= 0 or n < 2:
-            return clear
-        k = min(int(round(math.radians(cfg.free_clear_dropout_window_deg) / inc)), n // 2)
-        near = np.where(hit, r, np.inf)
-        full_circle = inc * n >= 2 * math.pi - 1.5 * inc
-        ext = np.concatenate([near[n - k :], near, near[:k]]) if full_circle else np.pad(near, k, constant_values=np.inf)
-        nb = near.copy()
-        for s in range(1, k + 1):
-            np.minimum(nb, ext[k - s : k - s + n], out=nb)
-            np.minimum(nb, ext[k + s : k + s + n], out=nb)
-        return np.minimum(clear, nb - 2.0 * cfg.resolution_m)
+        return scan_geometry(scan, self.cfg, self.T_base_scan)
 
     def process(self, scan: LaserScan, T_odom_base: Pose2) -> bool:
         """Process one scan with the wheel odometry at its stamp. Returns True if it became a keyframe."""

@@ -10,7 +10,7 @@ from app.ocslam.config import SlamConfig
 from app.ocslam.messages import LaserScan
 from app.ocslam.se2 import Pose2, wrap_angle
 from app.ocslam.slam import Slam
-from app.ocslam.slam.scan_input import clear_ranges
+from app.ocslam.slam.scan_input import clear_ranges, scan_geometry
 from app.ocslam.slam.synthetic import room_world, simulate_scan
 
 SEGS = room_world()
@@ -148,7 +148,7 @@ def test_too_close_beams_keep_the_scan_and_clear_nothing():
     slam.process(_bad(good, ranges=r), p)
     assert "negative_range" not in slam.skipped
     assert len(slam.trajectory()[0]) == n_before + 1
-    geo = slam._scan_geometry(_bad(good, ranges=r))
+    geo = scan_geometry(_bad(good, ranges=r), slam.cfg, slam.T_base_scan)
     assert len(geo.points) == np.count_nonzero(np.isfinite(r) & (r >= good.range_min) & (r < good.range_max))
     assert len(geo.ends) == len(r) - 40  # the -inf beams clear nothing
 
@@ -175,6 +175,6 @@ def test_a_dropout_on_a_wall_clears_only_up_to_the_wall():
     scan = simulate_scan(Pose2(2.0, 2.0, 0.0), SEGS, stamp=0.0)
     rr = scan.ranges.copy()
     rr[10:13] = np.inf
-    geo = slam._scan_geometry(dataclasses.replace(scan, ranges=rr))
+    geo = scan_geometry(dataclasses.replace(scan, ranges=rr), slam.cfg, slam.T_base_scan)
     assert len(geo.ends) == len(rr)
     assert np.all(np.hypot(*geo.ends[~geo.hit].T) < scan.range_max)

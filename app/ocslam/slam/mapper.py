@@ -77,19 +77,10 @@ class Slam:
         self._inserted = Growable((3,))  # pose each keyframe was inserted into the grid at (NaN: not yet)
         self._traj_cache: tuple[int, int, NDArray[np.float64]] | None = None
 
-    # ------------------------------------------------------------------------------------------
-    # input
-    # ------------------------------------------------------------------------------------------
-    def _check(self, scan: LaserScan, odom: NDArray[np.float64]) -> str | None:
-        return check_scan(scan, odom, self._last_stamp, self._beams)
-
-    def _scan_geometry(self, scan: LaserScan) -> KeyframeScan:
-        return scan_geometry(scan, self.cfg, self.T_base_scan)
-
     def process(self, scan: LaserScan, T_odom_base: Pose2) -> bool:
         """Process one scan with the wheel odometry at its stamp. Returns True if it became a keyframe."""
         odom = np.asarray(T_odom_base.as_array() if isinstance(T_odom_base, Pose2) else T_odom_base, np.float64)
-        reason = self._check(scan, odom)
+        reason = check_scan(scan, odom, self._last_stamp, self._beams)
         if reason is not None:
             self.skipped[reason] += 1
             return False
@@ -103,7 +94,7 @@ class Slam:
         if not cfg.enabled:
             self._record(scan.stamp, pred, odom, anchor=-1)
             return False
-        geo = self._scan_geometry(scan)
+        geo = scan_geometry(scan, cfg, self.T_base_scan)
         nk = len(self.keyframes)
         if len(geo.points) < cfg.min_points:
             self.skipped["too_few_returns"] += 1

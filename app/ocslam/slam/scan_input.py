@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import minimum_filter1d
 
 from app.ocslam.config import SlamConfig
 from app.ocslam.messages import LaserScan
@@ -55,13 +56,9 @@ def clear_ranges(r: NDArray[np.float64], hit: NDArray[np.bool_], increment: floa
     if cfg.free_clear_range_m <= 0 or cfg.free_clear_dropout_window_deg <= 0 or inc <= 0 or n < 2:
         return clear
     k = min(int(round(math.radians(cfg.free_clear_dropout_window_deg) / inc)), n // 2)
-    near = np.where(hit, r, np.inf)
     full_circle = inc * n >= 2 * math.pi - 1.5 * inc
-    ext = np.concatenate([near[n - k :], near, near[:k]]) if full_circle else np.pad(near, k, constant_values=np.inf)
-    nb = near.copy()
-    for s in range(1, k + 1):
-        np.minimum(nb, ext[k - s : k - s + n], out=nb)
-        np.minimum(nb, ext[k + s : k + s + n], out=nb)
+    # the nearest return within ±k beams of each beam (wrapping around a full circle)
+    nb = minimum_filter1d(np.where(hit, r, np.inf), 2 * k + 1, mode="wrap" if full_circle else "constant", cval=np.inf)
     return np.minimum(clear, nb - 2.0 * cfg.resolution_m)
 
 

@@ -157,11 +157,12 @@ def run_headless(core, *, out: Path | None = None, rate: float | None = None, qu
                 ahead = (e.t - bag_t0) / rate - (time.perf_counter() - wall0)
                 if ahead > 0:
                     time.sleep(ahead)
+        stopped_by_user = interrupted["flag"]
+        summary = core.summary()
+        summary["end_reason"] = "interrupted" if stopped_by_user else "end of bag"
+        write_run_dir(core, out, summary)  # still under our handler: a Ctrl-C while saving must not lose the run
     finally:
         signal.signal(signal.SIGINT, old)
-    summary = core.summary()
-    summary["end_reason"] = "interrupted" if interrupted["flag"] else "end of bag"
-    write_run_dir(core, out, summary)
     if not quiet:
         for k in ("bag_time_s", "wall_time_s", "real_time_factor", "lidar_extrinsic", "slam_ate_rmse_m",
                   "objects_recall", "objects_precision_strict", "objects_pos_err_mean_m", "end_reason"):
@@ -174,4 +175,4 @@ def run_headless(core, *, out: Path | None = None, rate: float | None = None, qu
             print()
             print(format_table({"paper (seed, real robot)": PAPER_ROW, "replay": rep}))
         print(f"{'run directory':>28}: {out}")
-    return 130 if interrupted["flag"] else 0
+    return 130 if stopped_by_user else 0

@@ -162,8 +162,8 @@ def run_headless(
                 bar.update(round(pipe.time - last_shown))
                 last_shown = round(pipe.time)
                 bar.set_postfix_str(pipe.nav_status[:40])
-    finally:
-        signal.signal(signal.SIGINT, old)
+    finally:  # our SIGINT handler stays until the run directory is written: a Ctrl-C now must not lose it
+        stopped_by_user = interrupted["flag"]
         if bar is not None:
             bar.close()
         pipe.wall_time_s = time.perf_counter() - pipe.wall_start
@@ -174,7 +174,7 @@ def run_headless(
         try:
             summary = pipe.summary()
             summary["end_reason"] = (
-                "interrupted" if interrupted["flag"] else "duration" if timed_out else (pipe.nav_status or "stopped")
+                "interrupted" if stopped_by_user else "duration" if timed_out else (pipe.nav_status or "stopped")
             )
             summary["duration_limit_s"] = limit
             if explore:
@@ -188,6 +188,7 @@ def run_headless(
 
             save_session(pipe, out, summary=summary, extra=extra)
         finally:
+            signal.signal(signal.SIGINT, old)
             pipe.close()
     if not quiet:
         keys = ("sim_time_s", "wall_time_s", "real_time_factor", "distance_m", "odom_final_error_m",
@@ -197,4 +198,4 @@ def run_headless(
             if k in summary:
                 print(f"{k:>28}: {summary[k]}")
         print(f"{'run directory':>28}: {out}")
-    return 130 if interrupted["flag"] else 0
+    return 130 if stopped_by_user else 0

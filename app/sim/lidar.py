@@ -100,8 +100,6 @@ class PlanarCaster:
     @staticmethod
     def _slice(verts: NDArray[np.float64], z: float) -> NDArray[np.float64] | None:
         """``(K, 2)`` CCW cross-section at height ``z`` of the convex hull of ``verts`` (None if it misses)."""
-        import shapely
-
         dz = verts[:, 2] - z
         above, below, on = verts[dz > 1e-12], verts[dz < -1e-12], verts[np.abs(dz) <= 1e-12]
         pts = [on[:, :2]]
@@ -113,13 +111,15 @@ class PlanarCaster:
         pts = np.vstack(pts)
         if len(pts) < 3:
             return None
-        hull = shapely.convex_hull(shapely.multipoints(pts))
-        if hull.geom_type != "Polygon" or hull.area <= 0:
+        from scipy.spatial import ConvexHull, QhullError
+
+        try:
+            hull = ConvexHull(pts)
+        except (QhullError, ValueError):  # fewer than three distinct points, or all on one line
             return None
-        ring = np.asarray(hull.exterior.coords)[:-1]
-        if shapely.Polygon(ring).exterior.is_ccw is False:
-            ring = ring[::-1]
-        return ring
+        if hull.volume <= 0:  # (a 2D hull's "volume" is its area)
+            return None
+        return np.ascontiguousarray(pts[hull.vertices])  # counter-clockwise, as qhull orders 2D hulls
 
     def cast(self, origin: NDArray[np.float64], angles: NDArray[np.float64], range_max: float) -> NDArray[np.float64]:
         """Ranges ``(N,)`` (``inf``: nothing within ``range_max``) of rays from ``origin`` ``(2,)`` along the

@@ -84,3 +84,21 @@ def test_growth_keeps_cells_and_removal_is_exact():
     _insert(g, p1, segs, sign=-1.0)
     assert np.all(g.log_odds == 0) and np.all(g.observed == 0)
     assert np.all(g.to_msg().data == -1)
+
+
+def test_message_cells_are_reused_until_the_grid_changes():
+    segs = room_world()
+    g = LogOddsGrid(0.05)
+    _insert(g, Pose2(0.0, 0.0, 0.0), segs)
+    a, b = g.to_msg(1.0), g.to_msg(2.0)
+    assert b.data is a.data and b.stamp == 2.0  # the same cells, each message its own stamp
+    assert not a.data.flags.writeable  # shared: nobody may write into them
+    before = a.data.copy()
+    _insert(g, Pose2(0.5, 0.2, 0.3), segs)  # a scan (and maybe growth) changes the cells
+    c = g.to_msg(3.0)
+    assert c.data is not a.data
+    fresh = LogOddsGrid(0.05)
+    _insert(fresh, Pose2(0.0, 0.0, 0.0), segs)
+    _insert(fresh, Pose2(0.5, 0.2, 0.3), segs)
+    np.testing.assert_array_equal(c.data, fresh.to_msg().data)  # what an uncached grid gives
+    np.testing.assert_array_equal(a.data, before)  # the old message is untouched

@@ -43,6 +43,9 @@ class LogOddsGrid:
         self.origin_xy = np.zeros(2)
         self.log_odds = np.zeros((0, 0), np.float32)  # (H, W) summed log-odds
         self.observed = np.zeros((0, 0), np.int32)  # (H, W) number of scans that touched the cell
+        #: bumped by every change of the cells (scan_update, ensure): to_msg reuses its last cells until then
+        self.revision = 0
+        self._msg_cells: tuple[int, NDArray[np.int8]] | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -78,6 +81,7 @@ class LogOddsGrid:
             ob[shift[1] : shift[1] + H, shift[0] : shift[0] + W] = self.observed
         self.origin_xy = origin
         self.log_odds, self.observed = lo, ob
+        self.revision += 1
 
     def scan_update(
         self, sensor_xy: NDArray[np.float64], ends_xy: NDArray[np.float64], hit: NDArray[np.bool_], sign: float = 1.0
@@ -112,6 +116,7 @@ class LogOddsGrid:
         step = 1 if sign > 0 else -1
         ob[fi] += step
         ob[hi] += step
+        self.revision += 1
 
     def probability(self) -> NDArray[np.float64]:
         """``(H, W)`` occupancy probability from the clamped log-odds (0.5 where unobserved)."""
@@ -119,12 +124,19 @@ class LogOddsGrid:
         return 1.0 / (1.0 + np.exp(-L))
 
     def to_msg(self, stamp: float = 0.0, frame_id: str = "map") -> OccupancyGrid:
-        """The grid as :class:`OccupancyGrid` (``-1`` unknown, ``0..100``)."""
+        """The grid as :class:`OccupancyGrid` (``-1`` unknown, ``0..100``). Its ``data`` is read-only and
+        shared by the messages of one :attr:`revision` (the loop asks for the map at every camera frame)."""
         H, W = self.shape
         if H == 0:
             return OccupancyGrid(self.resolution, Pose2(0.0, 0.0, 0.0), np.full((1, 1), -1, np.int8), stamp, frame_id)
-        data = np.rint(self.probability() * 100.0).astype(np.int8)
-        data[self.observed <= 0] = -1
+        cached = self._msg_cells
+        if cached is not None and cached[0] == self.revision:
+            data = cached[1]
+        else:
+            data = np.rint(self.probability() * 100.0).astype(np.int8)
+            data[self.observed <= 0] = -1
+            data.flags.writeable = False
+            self._msg_cells = (self.revision, data)
         return OccupancyGrid(
             resolution=self.resolution,
             origin=Pose2(float(self.origin_xy[0]), float(self.origin_xy[1]), 0.0),

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from app.ocslam.camera import CameraModel, ground_plane_point, transform_matrix
 from app.ocslam.messages import CLASS_INDEX, CameraInfo, Detection, Detections
-from app.ocslam.projection import area_from_box, assign_points, bounding_areas, camera_bound
+from app.ocslam.projection import area_from_box, assign_points, bounding_areas, camera_bound, contest_by_range, range_deviation
 from app.ocslam.seed_projection import (
     SEED_FY,
     seed_assign_points,
@@ -132,6 +132,33 @@ def test_exclusive_assignment_gives_a_point_to_the_area_its_range_fits():
     assert excl[0].tolist() == [True, False]
     assert excl[1].tolist() == [False, True]
     assert excl[2].tolist() == [False, True]
+
+
+def test_a_shared_point_goes_to_the_boxes_whose_bottom_range_explains_it():
+    """A table's leg 1.95 m away lies in the wedge of the table's box (bottom edge: floor at 1.9 m) and of a
+    chair's box behind it (floor at 2.5 m; its wedge starts 25 % nearer): the chair's box loses it, the
+    table's box loses a point at the chair's range, a point halfway stays with both within the slack
+    (neither box explains it much better), and a box cut at the bottom (no range) never loses a point."""
+    table = Detection(200.0, 150.0, 440.0, 240 + 0.19 * INFO.fy / 1.9, CLASS_INDEX["table"], 0.9)
+    chair = Detection(280.0, 100.0, 360.0, 240 + 0.19 * INFO.fy / 2.5, CLASS_INDEX["chair"], 0.9)
+    cut = Detection(250.0, 100.0, 390.0, 480.0, CLASS_INDEX["person"], 0.9)  # bottom at the image border
+    areas = bounding_areas([table, chair, cut], CAM, 3.5, bottom_margin_px=0.0)
+    assert [a.bottom_reliable for a in areas] == [True, True, False]
+    apex = CAM.apex_scan
+    pts = apex + np.array([[1.95, 0.0], [2.5, 0.01], [2.2, 0.0]])
+    dev = np.column_stack([range_deviation(pts, a) for a in areas])
+    assert dev[0, 0] == pytest.approx(0.05 / 1.95, abs=1e-3) and dev[0, 1] == pytest.approx(0.55 / 1.95, abs=1e-3)
+    assert dev[1, 1] == pytest.approx(0.0, abs=1e-3) and dev[1, 0] == pytest.approx(0.6 / 2.5, abs=1e-3)
+    assert np.isnan(dev[:, 2]).all()
+    member = assign_points(pts, areas, exclusive=False)
+    assert member.all()  # every wedge holds every point
+    out = contest_by_range(pts, areas, member, slack=0.1)
+    assert out[0].tolist() == [True, False, True]  # the leg: the table's (and the cut box keeps it)
+    assert out[1].tolist() == [False, True, True]  # at the chair's range: the chair's
+    # 2.2 m: 0.3 m beyond the table's range and 0.3 m before the chair's: neither loses it
+    assert out[2].tolist() == [True, True, True]
+    assert contest_by_range(pts, areas, member, slack=0.3)[0].tolist() == [True, True, True]  # within a wide slack
+    assert member.all()  # the input is not modified
 
 
 @settings(max_examples=60, deadline=None)

@@ -366,6 +366,13 @@ class ConsciousnessConfig:
         "the nearest); objects of different classes collide only over the points they share",
         live=True,
     )
+    range_contest_slack: float = param(
+        0.1, min=0.0, max=2.0, step=0.01,
+        help="improved, with point ownership: a point inside several boxes' wedges is lost by a box whose bottom-edge "
+        "range misses it by this much more (relative) than the best box's (a table's leg in front of a chair behind it; "
+        "2: off)",
+        live=True,
+    )
     leg_corner_m: float = param(
         0.12, min=0.0, max=1.0, step=0.01, unit="m",
         help="improved: a leg island farther than this from every corner of its group's rectangle is not one of its legs (0: off)",

@@ -56,7 +56,7 @@ from app.ocslam.footprint import Footprint
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import close_pairs, cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
-from app.ocslam.projection import assign_points, bounding_areas, camera_bound
+from app.ocslam.projection import assign_points, bounding_areas, camera_bound, contest_by_range
 from app.ocslam.se2 import Pose2
 from app.ocslam.seed import SeedConsciousness
 from app.ocslam.seed_projection import seed_camera_projection
@@ -361,6 +361,8 @@ class Consciousness:
             rep.reject("bad_box", len(boxes) - len(areas))
         ownership = bool(cfg.point_ownership)
         member = assign_points(pts_all, areas, exclusive=not ownership, range_tolerance=float(cfg.range_tolerance))
+        if ownership and float(cfg.range_contest_slack) < 2.0:
+            member = contest_by_range(pts_all, areas, member, float(cfg.range_contest_slack))
 
         # the whole scan's clusters: an island clipped by its area may belong to a wall
         gap = float(cfg.island_threshold_m)

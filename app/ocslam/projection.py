@@ -312,3 +312,37 @@ def assign_points(
     inside[rows] = False
     inside[rows, best] = True
     return inside
+
+
+def range_deviation(points_scan: FloatArray, area: BoundingArea) -> FloatArray:
+    """``(N,)`` how far each point's range about the area's apex lies outside the range its bottom edge
+    gives (``[near_lo, near_hi]``), relative to the point's range (0 inside; ``nan`` when the bottom edge
+    gives no range: cut by the border, or at or above the horizon)."""
+    pts = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2)
+    if not area.bottom_reliable or not np.isfinite(area.near_range_lo):
+        return np.full(len(pts), np.nan)
+    d = pts - area.apex[None, :]
+    r = np.hypot(d[:, 0], d[:, 1])
+    hi = area.near_range_hi if np.isfinite(area.near_range_hi) else np.inf
+    return (np.maximum(area.near_range_lo - r, 0.0) + np.maximum(r - hi, 0.0)) / np.maximum(r, 0.1)
+
+
+def contest_by_range(points_scan: FloatArray, areas: Sequence[BoundingArea], member: NDArray[np.bool_],
+                     slack: float) -> NDArray[np.bool_]:
+    """Points inside several areas' wedges go only to the areas whose bottom-edge range explains them:
+    an area loses a point whose range deviates from its own by more than ``slack`` (relative) beyond
+    the best-explaining area's (:func:`range_deviation`). A table's leg in front of a chair seen behind
+    it stays the table's; areas whose bottom edge gives no range keep their points. ``member``:
+    ``(N, A)`` as :func:`assign_points` without ``exclusive``; returns a copy."""
+    out = np.array(member, dtype=bool, copy=True)
+    multi = np.flatnonzero(out.sum(axis=1) > 1)
+    if len(multi) == 0:
+        return out
+    sub = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2)[multi]
+    dev = np.column_stack([range_deviation(sub, a) for a in areas])
+    dev = np.where(out[multi], dev, np.nan)
+    with np.errstate(invalid="ignore"):
+        best = np.nanmin(np.where(np.isnan(dev), np.inf, dev), axis=1)
+        lose = dev > best[:, None] + slack  # nan (no range, or not a member) never loses
+    out[multi] &= ~lose
+    return out

@@ -298,15 +298,10 @@ def assign_points(
     sub = pts[rows]
     cost = np.full((len(rows), A), np.inf)
     for k, area in enumerate(areas):
-        d = sub - area.apex[None, :]
-        r = np.hypot(d[:, 0], d[:, 1])
-        lo = area.near_range_lo * (1.0 - range_tolerance) if np.isfinite(area.near_range_lo) else 0.0
-        hi = area.near_range_hi * (1.0 + range_tolerance) if np.isfinite(area.near_range_hi) else np.inf
-        outside = np.maximum(lo - r, 0.0) + np.maximum(r - hi, 0.0)
         # Range mismatch dominates; then the nearest area; then the bisector's angular offset.
         near = area.near_range_m if np.isfinite(area.near_range_m) else 1e3
         off = np.abs(area.angular_offsets(sub))
-        c = outside / np.maximum(r, 0.1) * 1e6 + near * 1e2 + off - 1e-6 * area.confidence
+        c = _range_miss(sub, area, range_tolerance) * 1e6 + near * 1e2 + off - 1e-6 * area.confidence
         cost[:, k] = np.where(inside[rows, k], c, np.inf)
     best = np.argmin(cost, axis=1)
     inside[rows] = False
@@ -314,17 +309,23 @@ def assign_points(
     return inside
 
 
+def _range_miss(points_scan: FloatArray, area: BoundingArea, tolerance: float) -> FloatArray:
+    """``(N,)`` how far each point's range about the apex lies outside ``[near_lo·(1−tol), near_hi·(1+tol)]``
+    (an unknown bound: no limit), relative to the point's range."""
+    d = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2) - area.apex[None, :]
+    r = np.hypot(d[:, 0], d[:, 1])
+    lo = area.near_range_lo * (1.0 - tolerance) if np.isfinite(area.near_range_lo) else 0.0
+    hi = area.near_range_hi * (1.0 + tolerance) if np.isfinite(area.near_range_hi) else np.inf
+    return (np.maximum(lo - r, 0.0) + np.maximum(r - hi, 0.0)) / np.maximum(r, 0.1)
+
+
 def range_deviation(points_scan: FloatArray, area: BoundingArea) -> FloatArray:
     """``(N,)`` how far each point's range about the area's apex lies outside the range its bottom edge
     gives (``[near_lo, near_hi]``), relative to the point's range (0 inside; ``nan`` when the bottom edge
     gives no range: cut by the border, or at or above the horizon)."""
-    pts = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2)
     if not area.bottom_reliable or not np.isfinite(area.near_range_lo):
-        return np.full(len(pts), np.nan)
-    d = pts - area.apex[None, :]
-    r = np.hypot(d[:, 0], d[:, 1])
-    hi = area.near_range_hi if np.isfinite(area.near_range_hi) else np.inf
-    return (np.maximum(area.near_range_lo - r, 0.0) + np.maximum(r - hi, 0.0)) / np.maximum(r, 0.1)
+        return np.full(len(np.asarray(points_scan).reshape(-1, 2)), np.nan)
+    return _range_miss(points_scan, area, 0.0)
 
 
 def contest_by_range(points_scan: FloatArray, areas: Sequence[BoundingArea], member: NDArray[np.bool_],
@@ -340,9 +341,7 @@ def contest_by_range(points_scan: FloatArray, areas: Sequence[BoundingArea], mem
         return out
     sub = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2)[multi]
     dev = np.column_stack([range_deviation(sub, a) for a in areas])
-    dev = np.where(out[multi], dev, np.nan)
-    with np.errstate(invalid="ignore"):
-        best = np.nanmin(np.where(np.isnan(dev), np.inf, dev), axis=1)
-        lose = dev > best[:, None] + slack  # nan (no range, or not a member) never loses
-    out[multi] &= ~lose
+    dev = np.where(out[multi], dev, np.nan)  # nan: no range, or not a member: never loses
+    best = np.min(np.where(np.isnan(dev), np.inf, dev), axis=1)
+    out[multi] &= ~(dev > best[:, None] + slack)
     return out

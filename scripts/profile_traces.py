@@ -1,0 +1,78 @@
+"""Time (and optionally profile) the consciousness on cached sweep traces, and fingerprint the maps.
+
+The sweep's traces (``runs/sweep-cache/*/trace-*.pkl``, made by ``ocslam sweep``) are the exact
+``Consciousness.update`` calls of one recording per world, so replaying them measures the fusion's
+per-frame cost alone. The fingerprint (a hash of every object's class, pose, size and presence) shows
+whether a change to the code kept the object maps identical.
+
+    python scripts/profile_traces.py                       # every cached trace, default config
+    python scripts/profile_traces.py --profile 30          # + cProfile, top 30 functions by own time
+    python scripts/profile_traces.py --set consciousness.island_threshold_m=0.2
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import hashlib
+import pickle
+import pstats
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def fingerprint(objs) -> str:
+    h = hashlib.sha256()
+    for o in sorted(objs, key=lambda o: (o.label, round(o.pose.x, 6), round(o.pose.y, 6))):
+        h.update(f"{o.id} {o.label} {o.pose.x:.9f} {o.pose.y:.9f} {o.pose.yaw:.9f} {o.presence:.9f} "
+                 f"{o.size_x:.9f} {o.size_y:.9f} {o.frames_seen}\n".encode())
+    return h.hexdigest()[:12]
+
+
+def main() -> int:
+    from app.config import Config
+    from app.sweep.trace import FuseInput, replay_trace
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("traces", nargs="*", help="trace pickles (default: runs/sweep-cache/*/trace-*.pkl)")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    ap.add_argument("--profile", type=int, default=0, metavar="N", help="print the top N functions (own time)")
+    a = ap.parse_args()
+    files = [Path(p) for p in a.traces] or sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
+    if not files:
+        print("no traces: run `ocslam sweep assets/sweeps/six-constants.yaml --trials 1` first", file=sys.stderr)
+        return 2
+    cfg = Config()
+    cfg.set("detector.kind", "yolo")
+    for s in a.set:
+        k, _, v = s.partition("=")
+        cfg.set(k, v)
+    prof = cProfile.Profile() if a.profile else None
+    total_s = total_frames = 0.0
+    for f in files:
+        with open(f, "rb") as fh:
+            tr = pickle.load(fh)
+        frames = sum(isinstance(e, FuseInput) for e in tr.events)
+        t0 = time.process_time()
+        if prof:
+            prof.enable()
+        objs = replay_trace(tr, cfg)
+        if prof:
+            prof.disable()
+        dt = time.process_time() - t0
+        total_s += dt
+        total_frames += frames
+        print(f"{tr.name:28s} {frames:5d} frames {dt:7.2f} CPU s {1e3 * dt / max(frames, 1):6.2f} ms/frame "
+              f"{len(objs):3d} objects {fingerprint(objs)}")
+    print(f"{'total':28s} {int(total_frames):5d} frames {total_s:7.2f} CPU s {1e3 * total_s / max(total_frames, 1):6.2f} ms/frame")
+    if prof:
+        pstats.Stats(prof).sort_stats("tottime").print_stats(a.profile)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

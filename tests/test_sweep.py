@@ -111,3 +111,44 @@ def test_four_trial_sweep_table_best_config_and_resume(recording, tmp_path):
     assert {p.name for p in plots} >= {"precision_recall.png", "f1_vs_consciousness_frames_for_presence.png"}
     assert all(p.stat().st_size > 1000 for p in plots)
     assert json.loads((out / RESULTS).read_text().splitlines()[0])["trial_id"]
+
+
+@pytest.mark.slow
+def test_asha_stops_a_trial_that_finds_nothing_after_its_first_world(recording, tmp_path):
+    """With ``scheduler: asha`` a trial reports after each world; one worse than the trials that reached the
+    same world stops there (``complete`` false), and the best is chosen among the complete trials only."""
+    import ray
+
+    from app.sweep.results import best_row, write_table
+    from app.sweep.spec import parse_spec
+    from app.sweep.trace import score_trace
+    from app.sweep.trial import trial_config
+    from app.sweep.tune import RESULTS, read_results, run_sweep
+
+    bags = []
+    for name in ("w1", "w2", "w3"):  # three worlds of one recording (one cache entry, one trace)
+        (tmp_path / name).symlink_to(recording, target_is_directory=True)
+        bags.append(str(tmp_path / name / "bag"))
+    # one worker, grid order: the 0.2 trial scores every world first; the 0.99 trial keeps no box (F1 0)
+    # and is below the 0.2 trial's F1 after its first world: ASHA stops it there
+    spec = parse_spec({"name": "asha", "suite": {"bags": bags}, "sampler": "grid",
+                       "params": {"detector.confidence": [0.2, 0.99]},
+                       "scheduler": {"asha": {"grace_worlds": 1, "reduction_factor": 2}}})
+    out = tmp_path / "out"
+    try:
+        run_sweep(spec, out, workers=1, cache=tmp_path / "cache", quiet=True)
+    finally:
+        ray.shutdown()
+    rows = {r["params"]["detector.confidence"]: r for r in read_results(out / RESULTS)}
+    assert set(rows) == {0.2, 0.99}
+    good, bad = rows[0.2], rows[0.99]
+    with open(next((tmp_path / "cache").glob("bag-*/trace-*.pkl")), "rb") as f:
+        tr = pickle.load(f)
+    f1 = score_trace(tr, trial_config(spec.base_config().to_dict(), {"detector.confidence": 0.2}))["f1"]
+    assert f1 > 0.0
+    assert good["complete"] and good["worlds_done"] == 3 and set(good["per_world"]) == {"w1", "w2", "w3"}
+    assert good["mean_f1"] == pytest.approx(f1)
+    assert not bad["complete"] and bad["worlds_done"] == 1 and bad["mean_f1"] == 0.0
+    assert best_row(list(rows.values()))["trial_id"] == good["trial_id"]
+    _csv, md = write_table(spec, list(rows.values()), out)
+    assert "1 stopped early by ASHA" in md.read_text(encoding="utf-8")

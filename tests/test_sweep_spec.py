@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 import yaml
@@ -115,3 +116,23 @@ def test_oat_points_vary_one_parameter_at_a_time():
     from app.sweep.tune import total_trials
 
     assert total_trials(s) == 5
+
+
+def test_scheduler():
+    from app.sweep.spec import Scheduler
+
+    base = {"suite": "zoo-dev", "params": {"consciousness.presence_threshold": {"range": [0.5, 0.9]}}}
+    assert parse_spec(base).scheduler == Scheduler("fifo")
+    assert parse_spec({**base, "scheduler": "asha"}).scheduler == Scheduler("asha", 3, 3.0)
+    s = parse_spec({**base, "scheduler": {"asha": {"grace_worlds": 2, "reduction_factor": 4}}}).scheduler
+    assert (s.kind, s.grace_worlds, s.reduction_factor) == ("asha", 2, 4.0)
+    one = {**base, "only": ["meeting_room"]}
+    for body, msg in [("hyperband", "scheduler: expected fifo, asha"),
+                      ({"asha": {"grace": 2}}, "scheduler.asha: expected"),
+                      ({"asha": {"grace_worlds": 0}}, "grace_worlds: expected a positive integer"),
+                      ({"asha": {"reduction_factor": 1}}, "reduction_factor: expected a number"),
+                      ({"asha": {"grace_worlds": 9}}, "is not below the suite's 9 world(s)")]:
+        with pytest.raises(SpecError, match=re.escape(msg)):
+            parse_spec({**base, "scheduler": body})
+    with pytest.raises(SpecError, match=re.escape("is not below the suite's 1 world(s)")):
+        parse_spec({**one, "scheduler": "asha"})

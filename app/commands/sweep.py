@@ -57,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / f"sweep-{spec.name}"
     kind = "replay (recorded boxes, SLAM trace)" if spec.replayable else "headless re-run per world"
     print(f"sweep {spec.name}: {total_trials(spec)} trials ({spec.sampler}) of {len(spec.params)} parameters over "
-          f"{len(worlds)} worlds, {kind}; objective {spec.objective.describe()}; out {out}", file=sys.stderr)
+          f"{len(worlds)} worlds, {kind}; objective {spec.objective.describe()}; {spec.scheduler.describe()}; out {out}",
+          file=sys.stderr)
     if args.check:
         for p in spec.params:
             rng = p.values if p.values is not None else f"[{p.low:g}, {p.high:g}]" + (f" step {p.step:g}" if p.step else "")
@@ -79,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(info, indent=1, default=float))
     else:
-        print(f"{len(rows)}/{info['trials_total']} trials ({info['trials_wall_s']} s of trials, "
+        n_stopped = sum(not r.get("complete", True) for r in rows)
+        stopped = f", {n_stopped} stopped early" if n_stopped else ""
+        print(f"{len(rows)}/{info['trials_total']} trials{stopped} ({info['trials_wall_s']} s of trials, "
               f"{info['prepare_s']} s preparing; Ray {info['cluster']['address']}, {info['cluster']['cpus']:g} CPUs)")
         if b is not None:
             print(f"best: objective {b['objective']:.4f} (P {b['mean_precision_strict']:.3f}, R {b['mean_recall']:.3f}, "

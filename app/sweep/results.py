@@ -1,7 +1,9 @@
 """A sweep's outputs from its ``results.jsonl``: the per-trial table, the best configuration, the plots.
 
 - ``results.csv``: one row per trial: its parameters, each world's F1 (and strict precision / recall),
-  the means, the objective, the trial's seconds; ``results.md``: the same as a Markdown table, best first.
+  the means, the objective, the worlds it scored (ASHA stops some trials early), the trial's seconds;
+  ``results.md``: the same as a Markdown table, best first (trials stopped early last).
+- The best trial and the plots use the trials scored on every world only.
 - ``best.yaml``: the base config with the best trial's parameters, as :meth:`app.config.Config.save`
   writes it (``ocslam run --config OUT/best.yaml`` loads it).
 - ``plots/f1_vs_<param>.png`` (mean F1 against each parameter, the best trial marked, the defaults'
@@ -18,8 +20,14 @@ from typing import Any
 from app.sweep.spec import Spec
 
 
+def complete(row: dict[str, Any]) -> bool:
+    """True if the trial scored every world (an ASHA sweep stops some early; older files: every trial)."""
+    return bool(row.get("complete", True))
+
+
 def best_row(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
-    ok = [r for r in rows if r.get("objective") is not None and math.isfinite(float(r["objective"]))]
+    """The trial with the best objective among those scored on every world."""
+    ok = [r for r in rows if complete(r) and r.get("objective") is not None and math.isfinite(float(r["objective"]))]
     return max(ok, key=lambda r: (float(r["objective"]), float(r.get("mean_f1") or 0.0))) if ok else None
 
 
@@ -35,7 +43,7 @@ def write_table(spec: Spec, rows: list[dict[str, Any]], out: Path) -> tuple[Path
     worlds = sorted({w for r in rows for w in r.get("per_world", {})})
     head = ["trial_id", *names, *[f"f1[{w}]" for w in worlds], *[f"P[{w}]" for w in worlds],
             *[f"R[{w}]" for w in worlds], "mean_precision_strict", "mean_recall", "mean_f1", "mean_pos_err_mean_m",
-            "objective", "trial_s", "trial_cpu_s"]
+            "objective", "worlds_done", "complete", "trial_s", "trial_cpu_s"]
     csv_path = Path(out) / "results.csv"
     with open(csv_path, "w", newline="", encoding="utf-8") as f:
         wr = csv.writer(f)
@@ -46,17 +54,23 @@ def write_table(spec: Spec, rows: list[dict[str, Any]], out: Path) -> tuple[Path
                          *[pw.get(w, {}).get("f1") for w in worlds], *[pw.get(w, {}).get("precision_strict") for w in worlds],
                          *[pw.get(w, {}).get("recall") for w in worlds],
                          *[r.get(k) for k in ("mean_precision_strict", "mean_recall", "mean_f1", "mean_pos_err_mean_m",
-                                              "objective", "trial_s", "trial_cpu_s")]])
+                                              "objective")],
+                         r.get("worlds_done", len(pw)), complete(r), r.get("trial_s"), r.get("trial_cpu_s")])
     md_head = ["#", *[n.split(".")[1] for n in names], "P", "R", "F1", "objective", *worlds]
     lines = ["| " + " | ".join(md_head) + " |", "|" + "---|" * len(md_head)]
-    ranked = sorted(rows, key=lambda r: -float(r.get("objective") if r.get("objective") is not None else -1e9))
+    # the trials scored on every world first (best first), then those ASHA stopped early (their figures
+    # are over the worlds they reached: not comparable with the others')
+    ranked = sorted(rows, key=lambda r: (not complete(r), -float(r.get("objective") if r.get("objective") is not None else -1e9)))
     for i, r in enumerate(ranked, 1):
         pw = r.get("per_world", {})
-        lines.append("| " + " | ".join([str(i), *[_fmt(r["params"].get(n)) for n in names],
+        tag = str(i) if complete(r) else f"{i} (stopped, {len(pw)} worlds)"
+        lines.append("| " + " | ".join([tag, *[_fmt(r["params"].get(n)) for n in names],
                                         *[_fmt(r.get(k)) for k in ("mean_precision_strict", "mean_recall", "mean_f1", "objective")],
                                         *[_fmt(pw.get(w, {}).get("f1")) for w in worlds]]) + " |")
     md_path = Path(out) / "results.md"
-    md_path.write_text(f"Sweep {spec.name}: {len(rows)} trials, objective {spec.objective.describe()} "
+    n_full = sum(complete(r) for r in rows)
+    stopped = f" ({len(rows) - n_full} stopped early by ASHA)" if n_full < len(rows) else ""
+    md_path.write_text(f"Sweep {spec.name}: {len(rows)} trials{stopped}, objective {spec.objective.describe()} "
                        f"(per-world columns: F1)\n\n" + "\n".join(lines) + "\n", encoding="utf-8")
     return csv_path, md_path
 
@@ -85,7 +99,7 @@ def write_plots(spec: Spec, rows: list[dict[str, Any]], out: Path) -> list[Path]
         return []
     import numpy as np
 
-    ok = [r for r in rows if r.get("mean_f1") is not None and math.isfinite(float(r["mean_f1"]))]
+    ok = [r for r in rows if complete(r) and r.get("mean_f1") is not None and math.isfinite(float(r["mean_f1"]))]
     if not ok:
         return []
     pdir = Path(out) / "plots"

@@ -15,6 +15,11 @@
     sampler: random                     # grid | random | optuna (Tune's OptunaSearch, TPE) | oat (one at a
                                         # time: each parameter's grid with the others at the base values)
     objective: f1                       # f1 | {metric: precision_at_recall, recall_floor: 0.7}
+    scheduler: fifo                     # fifo (every trial scores every world) | asha (Tune's ASHAScheduler:
+                                        # a trial reports after each world, cheapest worlds first, and stops
+                                        # early when its objective so far is not in the best 1/reduction_factor
+                                        # of the trials that reached the same world) |
+                                        # {asha: {grace_worlds: 3, reduction_factor: 3}}
     trials: 200                         # random/optuna: trials (grid: the grid's size)
     include_defaults: true              # random/optuna: the first trial is the base config's values
     record_floor: 0.2                   # optional: the detector threshold of the recordings (default: the
@@ -35,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 SAMPLERS = ("grid", "random", "optuna", "oat")
+SCHEDULERS = ("fifo", "asha")
 METRICS = ("f1", "precision_at_recall")
 #: the fields a trial can change while replaying the recordings with the recorded boxes
 REPLAYABLE_SECTIONS = ("consciousness",)
@@ -90,6 +96,50 @@ class Objective:
 
 
 @dataclass
+class Scheduler:
+    """When trials stop: ``fifo`` (every trial scores the whole suite) or ``asha`` (Tune's asynchronous
+    successive halving: after ``grace_worlds`` worlds, then at every ``reduction_factor`` times as many, a
+    trial goes on only if its objective so far is in the best ``1/reduction_factor`` of the trials that
+    reached the same world)."""
+
+    kind: str = "fifo"
+    grace_worlds: int = 3
+    reduction_factor: float = 3.0
+
+    def describe(self) -> str:
+        if self.kind == "fifo":
+            return "every trial scores every world"
+        return (f"ASHA: trials stop early after {self.grace_worlds} worlds (then ×{self.reduction_factor:g}) unless "
+                f"in the best 1/{self.reduction_factor:g}")
+
+
+def parse_scheduler(body: Any, n_worlds: int) -> Scheduler:
+    """``fifo`` | ``asha`` | ``{asha: {grace_worlds: N, reduction_factor: R}}`` (one-line :class:`SpecError`)."""
+    if body is None or body == "fifo":
+        return Scheduler()
+    if body == "asha":
+        body = {"asha": {}}
+    if not (isinstance(body, dict) and len(body) == 1 and next(iter(body)) in SCHEDULERS):
+        raise SpecError(f"scheduler: expected fifo, asha or {{asha: {{grace_worlds: N, reduction_factor: R}}}}, got {body!r}")
+    kind, opts = next(iter(body.items()))
+    if kind == "fifo":
+        return Scheduler()
+    opts = opts or {}
+    if not isinstance(opts, dict) or set(opts) - {"grace_worlds", "reduction_factor"}:
+        raise SpecError(f"scheduler.asha: expected {{grace_worlds: N, reduction_factor: R}}, got {opts!r}")
+    g = opts.get("grace_worlds", min(3, max(n_worlds - 1, 1)))
+    if isinstance(g, bool) or not isinstance(g, int) or g < 1:
+        raise SpecError(f"scheduler.asha.grace_worlds: expected a positive integer, got {g!r}")
+    if g >= n_worlds:
+        raise SpecError(f"scheduler.asha.grace_worlds: {g} is not below the suite's {n_worlds} world(s): "
+                        "no trial could stop early (use fifo)")
+    r = opts.get("reduction_factor", 3)
+    if isinstance(r, bool) or not isinstance(r, (int, float)) or not r >= 1.5:
+        raise SpecError(f"scheduler.asha.reduction_factor: expected a number ≥ 1.5, got {r!r}")
+    return Scheduler("asha", int(g), float(r))
+
+
+@dataclass
 class Spec:
     name: str
     suite: Any
@@ -99,6 +149,7 @@ class Spec:
     set: dict[str, Any] = field(default_factory=dict)
     sampler: str = "random"
     objective: Objective = field(default_factory=Objective)
+    scheduler: Scheduler = field(default_factory=Scheduler)
     trials: int = 20
     seed: int = 0
     duration: float = 1500.0
@@ -219,7 +270,7 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
     if not isinstance(data, dict):
         raise SpecError(f"{source}: expected a mapping (name, suite, params, sampler, objective, trials)")
     known = {"name", "suite", "only", "config", "set", "params", "sampler", "objective", "trials", "seed", "duration",
-             "include_defaults", "record_floor"}
+             "include_defaults", "record_floor", "scheduler"}
     extra = set(data) - known
     if extra:
         k = sorted(extra)[0]
@@ -236,9 +287,10 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
     if not isinstance(only, list):
         raise SpecError(f"only: expected a list of world names, got {only!r}")
     try:
-        suite_worlds(data["suite"], [str(n) for n in only])
+        n_worlds = len(suite_worlds(data["suite"], [str(n) for n in only]))
     except SuiteError as e:
         raise SpecError(str(e)) from None
+    scheduler = parse_scheduler(data.get("scheduler"), n_worlds)
     sampler = data.get("sampler", "random")
     if sampler not in SAMPLERS:
         raise SpecError(f"sampler: {sampler!r} is not one of {', '.join(SAMPLERS)}")
@@ -278,7 +330,7 @@ def parse_spec(data: Any, source: str = "spec") -> Spec:
     name = str(data.get("name") or Path(source).stem)
     spec = Spec(name=name, suite=data["suite"], params=plist, only=[str(n) for n in only],
                 config=str(cfg_path) if cfg_path else None, set=dict(sets), sampler=sampler, objective=objective,
-                trials=trials, seed=seed, duration=float(dur), include_defaults=inc,
+                scheduler=scheduler, trials=trials, seed=seed, duration=float(dur), include_defaults=inc,
                 record_floor=float(rf) if rf is not None else None, source=source)
     if sampler in ("grid", "oat"):
         for p in plist:

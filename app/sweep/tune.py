@@ -12,7 +12,10 @@
 3. ``tune.Tuner`` — the sampler is Tune's: ``grid`` (``tune.grid_search``), ``random``
    (``BasicVariantGenerator`` with the spec's seed) or ``optuna`` (``OptunaSearch``, TPE); one CPU per
    trial, at most ``workers`` at once. Each finished trial is appended to ``results.jsonl``
-   (:class:`ResultsLog`, a Tune callback, which also draws the progress bar).
+   (:class:`ResultsLog`, a Tune callback, which also draws the progress bar). The scheduler is Tune's FIFO
+   (every trial scores every world) or, with ``scheduler: asha``, its ``ASHAScheduler``: a trial reports
+   after each world (the cheapest first, :func:`world_order`) and stops early when its objective so far is
+   not among the best ``1/reduction_factor`` of the trials that reached the same world.
 4. Interrupt (Ctrl-C, or SIGINT after ``stop_after`` trials) and resume: Tune saves the experiment's state under
    ``OUT/tune``; :func:`run_sweep` with ``resume=True`` restores it (``Tuner.restore``): finished trials are
    kept, unfinished and not yet started ones run.
@@ -161,8 +164,20 @@ def _bar(total: int, desc: str, quiet: bool):
 # ------------------------------------------------------------------------------------------------
 
 
+def world_order(ctx: dict[str, Any]) -> list[str]:
+    """The order a trial scores the worlds in: the suite's, or with ASHA the cheapest first (fewest recorded
+    frames; a trial that stops early has then cost little, and every trial reaches a rung through the same
+    worlds, so the trials it compares there were scored on the same worlds)."""
+    names = [w.name for w in ctx["worlds"]]
+    traces = ctx["traces"]
+    if ctx.get("scheduler") == "asha" and traces is not None:
+        return sorted(names, key=lambda n: (int(traces[n].info.get("frames", 0)), names.index(n)))
+    return names
+
+
 def run_trial(config: dict[str, Any], ctx: dict[str, Any]) -> None:
-    """Tune's function trainable: score one configuration over the suite and report once."""
+    """Tune's function trainable: score one configuration over the suite world by world; report once at
+    the end (``fifo``) or after every world (``asha``, whose scheduler may stop the trial between worlds)."""
     from ray import tune
 
     from app.sweep.spec import Objective
@@ -170,15 +185,23 @@ def run_trial(config: dict[str, Any], ctx: dict[str, Any]) -> None:
 
     t0, c0 = time.perf_counter(), time.process_time()
     cfg = trial_config(ctx["base"], config)
-    if ctx["traces"] is not None:
-        per = score_replay(cfg, ctx["traces"])
-    else:
-        per = score_headless(cfg, ctx["worlds"], ctx["duration"])
-    mean = mean_of(per)
     obj = Objective(**ctx["objective"])
-    tune.report({"objective": obj.value(mean), **{f"mean_{k}": v for k, v in mean.items()},
-                 "per_world_json": json.dumps(per, default=float), "trial_s": round(time.perf_counter() - t0, 3),
-                 "trial_cpu_s": round(time.process_time() - c0, 3), "pid": os.getpid(), "host": os.uname().nodename})
+    worlds = {w.name: w for w in ctx["worlds"]}
+    order = world_order(ctx)
+    each = ctx.get("scheduler") == "asha"
+    per: dict[str, dict[str, Any]] = {}
+    for i, name in enumerate(order):
+        if ctx["traces"] is not None:
+            per.update(score_replay(cfg, {name: ctx["traces"][name]}))
+        else:
+            per.update(score_headless(cfg, [worlds[name]], ctx["duration"]))
+        if each or i == len(order) - 1:
+            mean = mean_of(per)
+            tune.report({"objective": obj.value(mean), **{f"mean_{k}": v for k, v in mean.items()},
+                         "worlds_done": len(per), "complete": len(per) == len(order),
+                         "per_world_json": json.dumps(per, default=float), "trial_s": round(time.perf_counter() - t0, 3),
+                         "trial_cpu_s": round(time.process_time() - c0, 3), "pid": os.getpid(),
+                         "host": os.uname().nodename})
 
 
 def param_space(spec: Spec) -> dict[str, Any]:
@@ -218,13 +241,25 @@ def _search_alg(spec: Spec, workers: int):
     return BasicVariantGenerator(random_state=spec.seed, max_concurrent=workers, points_to_evaluate=points)
 
 
+def _scheduler(spec: Spec, n_worlds: int):
+    """Tune's FIFO scheduler (every trial runs to its end), or its ASHAScheduler over the worlds: a trial's
+    ``training_iteration`` is the number of worlds it has scored (``run_trial`` reports after each)."""
+    if spec.scheduler.kind != "asha":
+        return None
+    from ray.tune.schedulers import ASHAScheduler
+
+    return ASHAScheduler(time_attr="training_iteration", max_t=n_worlds, grace_period=spec.scheduler.grace_worlds,
+                         reduction_factor=spec.scheduler.reduction_factor)
+
+
 def _callbacks(out: Path, total: int, stop_after: int | None, quiet: bool):
     from ray import tune
 
     class ResultsLog(tune.Callback):
-        """Appends each finished trial to ``results.jsonl`` and moves the progress bar; after ``stop_after``
-        trials in this session it interrupts the sweep as Ctrl-C does (SIGINT: Tune saves its state and the
-        trials still running are resumed by ``Tuner.restore``)."""
+        """Appends each finished trial (scored on every world, or stopped early by ASHA: ``complete`` false,
+        ``worlds_done`` worlds) to ``results.jsonl`` and moves the progress bar; after ``stop_after`` trials in
+        this session it interrupts the sweep as Ctrl-C does (SIGINT: Tune saves its state and the trials still
+        running are resumed by ``Tuner.restore``)."""
 
         def __init__(self, path: str, total: int, quiet: bool, stop_after: int | None) -> None:
             self.path, self.total, self.quiet, self.stop_after = path, total, quiet, stop_after
@@ -242,18 +277,22 @@ def _callbacks(out: Path, total: int, stop_after: int | None, quiet: bool):
             if self._bar is not None and done:
                 self._bar.update(min(done, self.total))
 
-        def on_trial_result(self, iteration, trials, trial, result, **info):
+        def on_trial_complete(self, iteration, trials, trial, **info):
             from app.sweep.trial import clean
 
+            result = trial.last_result or {}
+            if "objective" not in result or trial.trial_id in self._seen:
+                return  # never reported (failed before its first world), or already written
             row = {"trial_id": trial.trial_id, "params": clean(dict(trial.config)), "objective": result.get("objective"),
                    **{k: result.get(k) for k in ("mean_precision_strict", "mean_recall", "mean_f1", "mean_pos_err_mean_m",
-                                                 "trial_s", "trial_cpu_s", "pid", "host")},
+                                                 "worlds_done", "complete", "trial_s", "trial_cpu_s", "pid", "host")},
                    "per_world": json.loads(result.get("per_world_json") or "{}"), "time": time.time()}
             with open(self.path, "a", encoding="utf-8") as f:
                 f.write(json.dumps(row, default=float) + "\n")
             if self._bar is not None:
                 self._bar.update(1)
-                self._bar.set_postfix_str(f"F1 {row['mean_f1']:.3f}, {row['trial_s']:.1f} s")
+                stop = "" if row.get("complete", True) else f", stopped after {row.get('worlds_done')} worlds"
+                self._bar.set_postfix_str(f"F1 {row['mean_f1']:.3f}, {row['trial_s']:.1f} s{stop}")
             self._seen.add(trial.trial_id)
             if self.stop_after is not None and len(self._seen) == self.stop_after:
                 import signal
@@ -312,7 +351,8 @@ def run_sweep(spec: Spec, out: Path, *, workers: int = 2, address: str | None = 
     t_prep = time.perf_counter() - t0
     from app.sweep.suite import suite_worlds
 
-    ctx = {"base": base.to_dict(), "traces": traces, "worlds": suite_worlds(spec.suite, spec.only),
+    worlds = suite_worlds(spec.suite, spec.only)
+    ctx = {"base": base.to_dict(), "traces": traces, "worlds": worlds, "scheduler": spec.scheduler.kind,
            "duration": spec.duration, "objective": {"metric": spec.objective.metric, "recall_floor": spec.objective.recall_floor}}
     trainable = tune.with_resources(tune.with_parameters(run_trial, ctx=ctx), {"cpu": 1})
     exp = out / TUNE_DIR
@@ -334,6 +374,7 @@ def run_sweep(spec: Spec, out: Path, *, workers: int = 2, address: str | None = 
             trainable,
             param_space=param_space(spec),
             tune_config=tune.TuneConfig(metric="objective", mode="max", search_alg=_search_alg(spec, workers),
+                                        scheduler=_scheduler(spec, len(worlds)),
                                         num_samples=1 if spec.sampler == "grid" else total_trials(spec),
                                         max_concurrent_trials=workers, reuse_actors=True),
             run_config=tune.RunConfig(name=TUNE_DIR, storage_path=str(out), callbacks=callbacks,

@@ -72,8 +72,9 @@ def area_candidate(
         labels, extents = scan_clusters
         if labels is not None and extents is not None:
             for isl in islands:
-                lab = np.unique(labels[isl.indices])
-                isl.full_extent = float(extents[lab[lab >= 0]].max()) if np.any(lab >= 0) else isl.extent
+                lab = labels[isl.indices]
+                lab = lab[lab >= 0]
+                isl.full_extent = float(extents[lab].max()) if len(lab) else isl.extent
     if pc.below_plane(z_lidar) and len(idx):
         rep.reject("below_lidar_plane_ignored", 1)
 
@@ -122,7 +123,9 @@ def area_candidate(
             if reason is None and not area.truncated["bottom"]:
                 # the camera sees the island at the LIDAR's height (nothing in front of it at that
                 # height, or the LIDAR would not see it): the box must reach down to that row
-                pts3 = np.hstack([cam.T_base_scan_2d.transform_points(isl.points), np.full((len(isl), 1), z_lidar)])
+                pts3 = np.empty((len(isl), 3))
+                pts3[:, :2] = cam.T_base_scan_2d.transform_points(isl.points)
+                pts3[:, 2] = z_lidar
                 uv, depth = cam.project(pts3)
                 ok = depth > 0.05
                 if np.any(ok) and y2 < float(np.min(uv[ok, 1])) - float(cfg.bottom_margin_px) - 2.0:
@@ -281,16 +284,18 @@ def _grid_free(
     half = pc.solid_fraction * area.half_angle
     b = area.bearing_center + np.linspace(-half, half, 9)
     r = r_front + max(grid.resolution, 0.05)
-    probe = area.apex[None, :] + r * np.stack([np.cos(b), np.sin(b)], axis=1)
+    probe = np.empty((9, 2))
+    probe[:, 0] = area.apex[0] + r * np.cos(b)
+    probe[:, 1] = area.apex[1] + r * np.sin(b)
     cells = grid.world_to_cell(T_map_scan.transform_points(probe))
-    inside = (cells[:, 0] >= 0) & (cells[:, 0] < grid.height) & (cells[:, 1] >= 0) & (cells[:, 1] < grid.width)
-    if not np.any(inside):
-        return False
-    v = grid.data[cells[inside, 0], cells[inside, 1]].astype(np.int64)
+    rows, cols = cells[:, 0], cells[:, 1]
+    inside = (rows >= 0) & (rows < grid.height) & (cols >= 0) & (cols < grid.width)
+    v = grid.data[rows[inside], cols[inside]]
     known = v >= 0
-    if known.sum() < 3:
+    n_known = int(np.count_nonzero(known))
+    if n_known < 3:
         return False
-    return bool(np.mean(v[known] < 20) > 0.6)
+    return int(np.count_nonzero(v[known] < 20)) / n_known > 0.6
 
 def _group_legs(best: int, islands: list[Island], eligible: list[int], pc: ClassPrior) -> list[int]:
     """Legs: add leg-sized islands, nearest first, while the union fits the class's footprint."""

@@ -98,6 +98,7 @@ class Consciousness:
         self._scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None] = (None, None)
         self._stamp = -math.inf
         self._known_free: Callable[[FloatArray], NDArray[np.bool_]] | None = None
+        self._beams: tuple[tuple[float, float, int], FloatArray, FloatArray, FloatArray] | None = None
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -276,6 +277,16 @@ class Consciousness:
     # ------------------------------------------------------------------------------------------
     # improved mode
     # ------------------------------------------------------------------------------------------
+    def _beam_angles(self, angle_min: float, increment: float, n: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(n,)`` beam angles of a scan and their cosines and sines (cached: a LIDAR's scans share them)."""
+        key = (angle_min, increment, n)
+        cached = self._beams
+        if cached is None or cached[0] != key:
+            angles = angle_min + increment * np.arange(n, dtype=np.float64)
+            cached = (key, angles, np.cos(angles), np.sin(angles))
+            self._beams = cached
+        return cached[1], cached[2], cached[3]
+
     def _valid_boxes(self, detections: Detections, rep: FrameReport) -> list[Detection]:
         out = []
         for b in detections.boxes:
@@ -328,19 +339,26 @@ class Consciousness:
 
         # scan: valid points (for islands) and every beam (for free-space / occlusion tests)
         ranges = np.asarray(scan.ranges, dtype=np.float64).reshape(-1)
-        angles = scan.angle_min + scan.angle_increment * np.arange(len(ranges), dtype=np.float64)
+        angles, cos_a, sin_a = self._beam_angles(float(scan.angle_min), float(scan.angle_increment), len(ranges))
         with np.errstate(invalid="ignore"):
-            valid = np.isfinite(ranges) & (ranges >= scan.range_min) & (ranges <= scan.range_max)
-            no_return = np.isposinf(ranges) | (np.isfinite(ranges) & (ranges > scan.range_max))
-        beam_r = np.where(valid, ranges, np.where(no_return, np.inf, np.nan))
-        known = ~np.isnan(beam_r)
-        beam_b_scan, beam_r_scan = angles[known], beam_r[known]
-        pts_all = np.stack([ranges[valid] * np.cos(angles[valid]), ranges[valid] * np.sin(angles[valid])], axis=1)
+            finite = np.isfinite(ranges)
+            valid = finite & (ranges >= scan.range_min) & (ranges <= scan.range_max)
+            no_return = np.isposinf(ranges) | (finite & (ranges > scan.range_max))
+        known = valid | no_return
+        beam_b_scan = angles[known]
+        beam_r_scan = np.where(valid[known], ranges[known], np.inf)
+        r_valid = ranges[valid]
+        pts_all = np.empty((len(r_valid), 2))
+        np.multiply(r_valid, cos_a[valid], out=pts_all[:, 0])
+        np.multiply(r_valid, sin_a[valid], out=pts_all[:, 1])
         # beams about the apex (the wedges' tip)
-        far = np.where(np.isfinite(beam_r_scan), beam_r_scan, 1e3)
-        ends = np.stack([far * np.cos(beam_b_scan), far * np.sin(beam_b_scan)], axis=1) - cam.apex_scan[None, :]
-        beam_b_apex = np.arctan2(ends[:, 1], ends[:, 0])
-        beam_r_apex = np.where(np.isfinite(beam_r_scan), np.hypot(ends[:, 0], ends[:, 1]), np.inf)
+        hit = np.isfinite(beam_r_scan)
+        far = np.where(hit, beam_r_scan, 1e3)
+        apex = cam.apex_scan
+        ex = far * cos_a[known] - apex[0]
+        ey = far * sin_a[known] - apex[1]
+        beam_b_apex = np.arctan2(ey, ex)
+        beam_r_apex = np.where(hit, np.hypot(ex, ey), np.inf)
 
         rep = FrameReport(
             stamp=stamp,

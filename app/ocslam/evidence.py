@@ -14,6 +14,9 @@ The footprint estimated from it is :func:`app.ocslam.footprint.estimate_footprin
 
 from __future__ import annotations
 
+import math
+from functools import lru_cache
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -22,6 +25,39 @@ from app.ocslam.se2 import Pose2
 FloatArray = NDArray[np.float64]
 #: The keyframe tag of evidence seen without a SLAM keyframe.
 NO_KEYFRAME = -1
+
+
+def _appended(a: NDArray, value: object) -> NDArray:
+    """A copy of ``a`` ``(N, ...)`` with one more row ``value`` (``np.append``/``np.vstack`` without their
+    overhead)."""
+    out = np.empty((len(a) + 1,) + a.shape[1:], dtype=a.dtype)
+    out[:-1] = a
+    out[-1] = value
+    return out
+
+
+def _unique_inverse(keys: NDArray[np.int64]) -> tuple[NDArray[np.intp], int]:
+    """``(inverse, count)`` of ``np.unique(keys, return_inverse=True)`` for a non-empty ``(N,)`` array:
+    each key's rank among the distinct keys (ascending), the same sort and ranks without the wrapper's
+    overhead."""
+    perm = keys.argsort()
+    srt = keys[perm]
+    new = np.empty(len(srt), dtype=bool)
+    new[0] = True
+    np.not_equal(srt[1:], srt[:-1], out=new[1:])
+    rank = np.cumsum(new) - 1
+    inv = np.empty(len(srt), dtype=np.intp)
+    inv[perm] = rank
+    return inv, int(rank[-1]) + 1
+
+
+@lru_cache(maxsize=8)
+def _lower_triangle(n: int) -> NDArray[np.bool_]:
+    """``(n, n)`` mask of the diagonal and below (read-only, cached: the ray count is always
+    ``max_rays + 1`` here)."""
+    m = np.tril(np.ones((n, n), dtype=bool))
+    m.setflags(write=False)
+    return m
 
 
 class ObjectEvidence:
@@ -60,7 +96,10 @@ class ObjectEvidence:
     def add_points(self, points: FloatArray, kf: int = NO_KEYFRAME) -> None:
         """Add ``(N, 2)`` points (object frame), merging them into voxels of ``voxel_m``."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        p = p[np.all(np.isfinite(p), axis=1)]
+        fin = np.isfinite(p)
+        ok = fin[:, 0] & fin[:, 1]
+        if not ok.all():
+            p = p[ok]
         if len(p) == 0:
             return
         # existing voxel means carry their hit counts as weights
@@ -69,15 +108,15 @@ class ObjectEvidence:
         kfs = np.concatenate([self.point_kf, np.full(len(p), kf, dtype=np.int64)])
         keys = np.floor(pos / self.voxel_m).astype(np.int64)
         key1 = (keys[:, 0] + (1 << 31)) * (1 << 32) + (keys[:, 1] + (1 << 31))
-        _, inv = np.unique(key1, return_inverse=True)
-        inv = inv.reshape(-1)
-        n = int(inv.max()) + 1
+        inv, n = _unique_inverse(key1)
         wsum = np.bincount(inv, weights=w, minlength=n)
         sx = np.bincount(inv, weights=pos[:, 0] * w, minlength=n)
         sy = np.bincount(inv, weights=pos[:, 1] * w, minlength=n)
         kf_out = np.full(n, NO_KEYFRAME, dtype=np.int64)
         np.maximum.at(kf_out, inv, kfs)
-        self.points = np.stack([sx / wsum, sy / wsum], axis=1)
+        self.points = np.empty((n, 2))
+        np.divide(sx, wsum, out=self.points[:, 0])
+        np.divide(sy, wsum, out=self.points[:, 1])
         self.hits = np.rint(wsum).astype(np.int64)
         self.point_kf = kf_out
         if len(self.points) > self.max_points:
@@ -101,24 +140,27 @@ class ObjectEvidence:
         ``open_side``: +1 if the box was cut by the image's left border (the ray is then that border's
         half-line and the object continues to its left), −1 for the right border, 0 otherwise.
         """
-        d = np.asarray(direction, dtype=np.float64)
+        d = np.asarray(direction, dtype=np.float64).reshape(2)
         n = float(np.linalg.norm(d))
-        o = np.asarray(origin, dtype=np.float64)
-        if n < 1e-12 or not np.all(np.isfinite(o)) or not np.isfinite(n):
+        o = np.asarray(origin, dtype=np.float64).reshape(2)
+        if n < 1e-12 or not np.isfinite(n) or not (math.isfinite(o[0]) and math.isfinite(o[1])):
             return
         d = d / n
-        self.ray_weight = self.ray_weight * decay
-        self.ray_origin = np.vstack([self.ray_origin, o[None, :]])
-        self.ray_dir = np.vstack([self.ray_dir, d[None, :]])
-        self.ray_weight = np.append(self.ray_weight, float(weight))
-        self.ray_kf = np.append(self.ray_kf, int(kf))
-        self.ray_app = np.append(self.ray_app, float(apparent_width))
-        self.ray_open = np.append(self.ray_open, int(open_side))
-        if len(self.ray_weight) > self.max_rays:
+        m = len(self.ray_weight)
+        self.ray_origin = _appended(self.ray_origin, o)
+        self.ray_dir = _appended(self.ray_dir, d)
+        w = np.empty(m + 1)
+        np.multiply(self.ray_weight, decay, out=w[:m])
+        w[m] = float(weight)
+        self.ray_weight = w
+        self.ray_kf = _appended(self.ray_kf, int(kf))
+        self.ray_app = _appended(self.ray_app, float(apparent_width))
+        self.ray_open = _appended(self.ray_open, int(open_side))
+        if m + 1 > self.max_rays:
             # keep the viewpoints spread out: drop the older ray of the closest pair of origins
             o_all = self.ray_origin
             d2 = np.sum((o_all[:, None, :] - o_all[None, :, :]) ** 2, axis=-1)
-            d2[np.tril_indices(len(o_all))] = np.inf
+            d2[_lower_triangle(len(o_all))] = np.inf
             i, _j = np.unravel_index(np.argmin(d2), d2.shape)
             keep = np.ones(len(o_all), dtype=bool)
             keep[i] = False

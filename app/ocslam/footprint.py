@@ -75,6 +75,16 @@ class Footprint:
         return Footprint(c, float(self.yaw + T.yaw), self.size_x, self.size_y)
 
 
+def _nearest_distance(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``(N,)`` distance from each of ``(N, 2)`` points to the nearest of ``(M, 2)`` points (M ≥ 1):
+    all pairs for small sets, a KD-tree for large ones."""
+    if len(a) * len(b) <= 4096:
+        dx = a[:, 0][:, None] - b[:, 0][None, :]
+        dy = a[:, 1][:, None] - b[:, 1][None, :]
+        return np.sqrt((dx * dx + dy * dy).min(axis=1))
+    return np.asarray(cKDTree(b).query(a, k=1)[0], dtype=np.float64)
+
+
 def _hull_angles(p: FloatArray) -> FloatArray:
     """Orientations (mod 90°) of the convex hull's edges of ``(N, 2)`` points (N ≥ 3)."""
     hull = cv2.convexHull(p.astype(np.float32)).reshape(-1, 2).astype(np.float64)
@@ -101,17 +111,18 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
     the points' extents along ``e1 = (cos θ, sin θ)`` and ``e2 = (−sin θ, cos θ)``.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    if len(p) >= 3:
-        c = p.mean(axis=0)
-        q = p - c
+    n = len(p)
+    if n >= 3:
+        q = p - p.sum(axis=0) / n  # p.mean(axis=0), without its overhead
         thetas = _hull_angles(q)
-        cs, sn = np.cos(thetas), np.sin(thetas)
-        a = q[:, 0][None, :] * cs[:, None] + q[:, 1][None, :] * sn[:, None]  # (K, N)
-        b = -q[:, 0][None, :] * sn[:, None] + q[:, 1][None, :] * cs[:, None]
+        cs, sn = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+        qx, qy = q[:, 0][None, :], q[:, 1][None, :]
+        a = qx * cs + qy * sn  # (K, N)
+        b = qy * cs - qx * sn
         a_lo, a_hi = a.min(axis=1, keepdims=True), a.max(axis=1, keepdims=True)
         b_lo, b_hi = b.min(axis=1, keepdims=True), b.max(axis=1, keepdims=True)
         area = ((a_hi - a_lo) * (b_hi - b_lo))[:, 0]
-        if (q.max(axis=0) - q.min(axis=0)).max() < 0.5:
+        if max(float(qx.max() - qx.min()), float(qy.max() - qy.min())) < 0.5:
             # a small cluster: the outline says little, the minimum-area rectangle follows its line
             th = float(thetas[int(np.argmin(area))])
         else:
@@ -120,21 +131,38 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
             score = (1.0 / np.maximum(np.minimum(da, db), 0.01)).sum(axis=1)
             best = np.flatnonzero(score >= score.max() * (1.0 - 1e-6))  # ties: the smaller area
             th = float(thetas[best[np.argmin(area[best])]])
-    elif len(p) == 2:
+    elif n == 2:
         d = p[1] - p[0]
         th = float(np.arctan2(d[1], d[0]) % (np.pi / 2))
     else:
         th = 0.0
     c, s = np.cos(th), np.sin(th)
-    a = p[:, 0] * c + p[:, 1] * s
-    b = -p[:, 0] * s + p[:, 1] * c
-    return th, np.array([a.min(), b.min()]), np.array([a.max(), b.max()])
+    a1 = p[:, 0] * c + p[:, 1] * s
+    b1 = -p[:, 0] * s + p[:, 1] * c
+    return th, np.array([a1.min(), b1.min()]), np.array([a1.max(), b1.max()])
+
+
+def _solve2(H: FloatArray, g: FloatArray) -> FloatArray:
+    """``H⁻¹ g`` for a 2×2 ``H``: LU with partial pivoting in Python floats (numpy's ``linalg.solve``
+    costs more than the arithmetic on a 2×2 system)."""
+    (a, b), (c, d) = H.tolist()
+    g0, g1 = g.tolist()
+    if abs(c) > abs(a):  # pivot: swap the rows
+        a, b, c, d, g0, g1 = c, d, a, b, g1, g0
+    if a == 0.0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    m = c / a
+    u = d - m * b
+    if u == 0.0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    x1 = (g1 - m * g0) / u
+    return np.array([(g0 - b * x1) / a, x1])
 
 
 def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
     """argmin ``½ sᵀHs − gᵀs`` over the box ``lo ≤ s ≤ hi`` (2D, H positive definite)."""
-    s = np.asarray(np.linalg.solve(H, g), dtype=np.float64)
-    if np.all(s >= lo - 1e-12) and np.all(s <= hi + 1e-12):
+    s = _solve2(H, g)
+    if lo[0] - 1e-12 <= s[0] <= hi[0] + 1e-12 and lo[1] - 1e-12 <= s[1] <= hi[1] + 1e-12:
         return s
 
     def f(x: FloatArray) -> float:
@@ -152,19 +180,25 @@ def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> Flo
     return min(cands, key=f)
 
 
-def _one_sided(viewpoints: FloatArray, center: FloatArray, axis: FloatArray, half: float) -> int:
-    """+1/−1 if every viewpoint outside the slab ``|(v − c)·axis| ≤ half`` is on that side, else 0."""
+def _median(v: FloatArray) -> float:
+    """``np.median`` of a non-empty finite ``(N,)`` array (the same value, without its overhead)."""
+    s = np.sort(v)
+    n = len(s)
+    return float(s[n // 2]) if n % 2 else float((s[n // 2 - 1] + s[n // 2]) / 2.0)
+
+
+def _one_sided_axes(viewpoints: FloatArray, center: FloatArray, axes: FloatArray, half: FloatArray) -> list[int]:
+    """For each row of ``axes`` ``(2, 2)``: +1/−1 if every viewpoint outside the slab
+    ``|(v − c)·axis| ≤ half + 5 cm`` (``half`` ``(2,)``) is on that side, else 0."""
     if len(viewpoints) == 0:
-        return 0
-    s = (viewpoints - center[None, :]) @ axis
-    out = s[np.abs(s) > half + 0.05]
-    if len(out) == 0:
-        return 0
-    if np.all(out > 0):
-        return 1
-    if np.all(out < 0):
-        return -1
-    return 0
+        return [0, 0]
+    rel = viewpoints - center[None, :]
+    out = []
+    for i in range(2):
+        s = rel @ axes[i]
+        o = s[np.abs(s) > half[i] + 0.05]
+        out.append(0 if len(o) == 0 else 1 if o.min() > 0 else -1 if o.max() < 0 else 0)
+    return out
 
 
 def depth_for_width(width: float, pc: ClassPrior, legs: bool = False) -> tuple[float, float, float]:
@@ -204,10 +238,9 @@ def _extension_free(
     edge = hi[i] if direction > 0 else lo[i]
     a = edge + direction * np.linspace(0.1, max(length - 0.05, 0.1), 6)
     b = np.linspace(lo[j], hi[j], 5) if hi[j] - lo[j] > 0.05 else np.array([0.5 * (lo[j] + hi[j])])
-    A, B = np.meshgrid(a, b)
-    loc = np.stack([A.ravel(), B.ravel()], axis=1)
-    rect = np.zeros_like(loc)
-    rect[:, i], rect[:, j] = loc[:, 0], loc[:, 1]
+    rect = np.empty((len(a) * len(b), 2))
+    rect[:, i] = np.tile(a, len(b))  # the grid of (a, b), b-major (meshgrid's order)
+    rect[:, j] = np.repeat(b, len(a))
     pts = rect @ axes  # rectangle coordinates → object frame
     free = known_free(pts)
     return bool(np.mean(free) > 0.6)
@@ -259,18 +292,21 @@ def estimate_footprint(
     # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
     # well-seen voxel are ignored
     strong = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
-    keep = strong.copy()
-    if np.any(~strong) and np.any(strong):
-        dist, _ = cKDTree(ev.points[strong]).query(ev.points[~strong], k=1)
-        keep[~strong] = dist <= _STRAY_M
-    pts, hits = ev.points[keep], ev.hits[keep]
+    n_strong = int(np.count_nonzero(strong))
+    if n_strong == len(strong) or n_strong == 0:
+        pts, hits = ev.points, ev.hits
+    else:
+        keep = strong.copy()
+        weak = ~strong
+        keep[weak] = _nearest_distance(ev.points[weak], ev.points[strong]) <= _STRAY_M
+        pts, hits = ev.points[keep], ev.hits[keep]
     th, lo, hi = min_area_rect(pts)
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
     d_obs = hi - lo
     mid = 0.5 * (lo + hi)
     center0 = axes.T @ mid
     views = ev.ray_origin
-    side = [_one_sided(views, center0, axes[i], d_obs[i] / 2) for i in range(2)]
+    side = _one_sided_axes(views, center0, axes, d_obs / 2)
     depth_axis = -1
     one_face = False
     if len(views):
@@ -290,9 +326,11 @@ def estimate_footprint(
         along = np.abs(ev.ray_dir @ axes[depth_axis]) > 0.85
         vals = ev.ray_app[along & np.isfinite(ev.ray_app)]
         if len(vals):
-            w_app = float(np.median(vals))
+            w_app = _median(vals)
 
-    cut_only = not np.any(ev.ray_weight > 1e-6) and len(views) > 0
+    use = ev.ray_weight > 1e-6  # rays that place the centre (boxes not cut by the image border)
+    any_use = bool(use.any())
+    cut_only = not any_use and len(views) > 0
     if cut_only and not one_face:
         # seen only through boxes cut by the image border: the rest is outside the image, anywhere
         # from the border round to the robot's side, so nothing is extrapolated; fragments of one
@@ -371,13 +409,14 @@ def estimate_footprint(
     # least squares: the centre near every weighted bisector ray, regularised towards the prior
     H = ray_prior_weight * np.diag(lam)
     g = ray_prior_weight * lam * s_prior
-    wts = ev.ray_weight
-    use = wts > 1e-6
-    if np.any(use):
-        n_world = np.stack([-ev.ray_dir[use, 1], ev.ray_dir[use, 0]], axis=1)
+    if any_use:
+        d_use = ev.ray_dir[use]
+        n_world = np.empty_like(d_use)
+        np.negative(d_use[:, 1], out=n_world[:, 0])
+        n_world[:, 1] = d_use[:, 0]
         n_rect = n_world @ axes.T  # normals in rectangle coordinates
         o_rect = ev.ray_origin[use] @ axes.T
-        w = wts[use]
+        w = ev.ray_weight[use]
         H = H + (n_rect * w[:, None]).T @ n_rect
         g = g + (n_rect * (w * np.sum(n_rect * o_rect, axis=1))[:, None]).sum(axis=0)
     s_opt = _box_qp(H, g, s_lo, s_hi)

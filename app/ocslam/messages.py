@@ -232,9 +232,10 @@ class OccupancyGrid:
     def world_to_cell(self, points: NDArray[np.float64]) -> NDArray[np.int64]:
         """``(N, 2)`` points in ``frame_id`` → ``(N, 2)`` integer ``(row, col)`` (may be out of bounds)."""
         local = self.origin.inverse().transform_points(points)
-        col = np.floor(local[:, 0] / self.resolution).astype(np.int64)
-        row = np.floor(local[:, 1] / self.resolution).astype(np.int64)
-        return np.stack([row, col], axis=1)
+        out = np.empty((len(local), 2), dtype=np.int64)
+        out[:, 0] = np.floor(local[:, 1] / self.resolution)
+        out[:, 1] = np.floor(local[:, 0] / self.resolution)
+        return out
 
 
 @dataclass(slots=True)

@@ -127,6 +127,10 @@ def angle_wrap(a):
 
 def overlap_fraction(a: Footprint, b: Footprint) -> float:
     """Intersection area over the smaller footprint's area."""
+    # rectangles whose circumcircles are apart do not overlap (most pairs of a map): no polygons
+    reach = 0.5 * (math.hypot(a.size_x, a.size_y) + math.hypot(b.size_x, b.size_y))
+    if math.hypot(float(a.center[0] - b.center[0]), float(a.center[1] - b.center[1])) > reach + 1e-9:
+        return 0.0
     pa, pb = a.polygon, b.polygon
     inter = shapely.area(shapely.intersection(pa, pb))
     small = max(min(pa.area, pb.area), 1e-9)
@@ -137,6 +141,10 @@ def min_distance(a: FloatArray, b: FloatArray) -> float:
     """Smallest distance between two ``(N, 2)`` / ``(M, 2)`` point sets (inf if either is empty)."""
     if len(a) == 0 or len(b) == 0:
         return math.inf
+    if len(a) * len(b) <= 4096:  # all pairs: cheaper than a KD-tree for small sets
+        dx = a[:, 0][:, None] - b[:, 0][None, :]
+        dy = a[:, 1][:, None] - b[:, 1][None, :]
+        return math.sqrt(float((dx * dx + dy * dy).min()))
     return float(cKDTree(b).query(a, k=1)[0].min())
 
 
@@ -159,9 +167,13 @@ def grid_free_fn(grid: OccupancyGrid | None) -> FreeFn | None:
 
     def free(points: FloatArray) -> NDArray[np.bool_]:
         cells = grid.world_to_cell(points)
-        inside = (cells[:, 0] >= 0) & (cells[:, 0] < grid.height) & (cells[:, 1] >= 0) & (cells[:, 1] < grid.width)
+        r, c = cells[:, 0], cells[:, 1]
+        inside = (r >= 0) & (r < grid.height) & (c >= 0) & (c < grid.width)
+        if inside.all():
+            v = grid.data[r, c]
+            return (v >= 0) & (v < 20)
         out = np.zeros(len(points), dtype=bool)
-        v = grid.data[cells[inside, 0], cells[inside, 1]].astype(np.int64)
+        v = grid.data[r[inside], c[inside]]
         out[inside] = (v >= 0) & (v < 20)
         return out
 

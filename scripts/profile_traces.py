@@ -35,6 +35,7 @@ def fingerprint(objs) -> str:
 
 def main() -> int:
     from app.config import Config
+    from app.ocslam.evaluation import evaluate_objects
     from app.sweep.trace import FuseInput, replay_trace
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -53,6 +54,7 @@ def main() -> int:
         cfg.set(k, v)
     prof = cProfile.Profile() if a.profile else None
     total_s = total_frames = 0.0
+    f1s = []
     for f in files:
         with open(f, "rb") as fh:
             tr = pickle.load(fh)
@@ -66,9 +68,12 @@ def main() -> int:
         dt = time.process_time() - t0
         total_s += dt
         total_frames += frames
+        ev = evaluate_objects(objs, tr.truth, tr.obstacles, cfg.consciousness.presence_threshold)
+        f1s.append(ev.f1)
         print(f"{tr.name:28s} {frames:5d} frames {dt:7.2f} CPU s {1e3 * dt / max(frames, 1):6.2f} ms/frame "
-              f"{len(objs):3d} objects {fingerprint(objs)}")
-    print(f"{'total':28s} {int(total_frames):5d} frames {total_s:7.2f} CPU s {1e3 * total_s / max(total_frames, 1):6.2f} ms/frame")
+              f"{len(objs):3d} objects {fingerprint(objs)} F1 {ev.f1:.3f}")
+    print(f"{'total':28s} {int(total_frames):5d} frames {total_s:7.2f} CPU s {1e3 * total_s / max(total_frames, 1):6.2f} ms/frame "
+          f"mean F1 {sum(f1s) / len(f1s):.4f}")
     if prof:
         pstats.Stats(prof).sort_stats("tottime").print_stats(a.profile)
     return 0

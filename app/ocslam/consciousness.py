@@ -458,6 +458,8 @@ class Consciousness:
         return rep
 
     def _apply_deltas(self, deltas: dict[int, Pose2]) -> None:
+        """Move every track's evidence with its keyframes; only the tracks with evidence from a moved
+        keyframe are re-estimated (the others keep their footprint, and its free-space check)."""
         for t in self._tracks:
-            t.evidence.transform(deltas)
-            t.refresh()
+            if t.evidence.transform(deltas):
+                t.refresh()

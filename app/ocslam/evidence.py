@@ -196,11 +196,14 @@ class ObjectEvidence:
                 self.gp_center = 0.5 * (self.gp_center + other.gp_center)
 
     # -- corrections -----------------------------------------------------------------------------
-    def transform(self, deltas: dict[int, Pose2]) -> None:
-        """Move every piece seen from keyframe ``k`` by ``deltas[k]`` (``T_map_kf_new ∘ T_map_kf_old⁻¹``)."""
+    def transform(self, deltas: dict[int, Pose2]) -> bool:
+        """Move every piece seen from keyframe ``k`` by ``deltas[k]`` (``T_map_kf_new ∘ T_map_kf_old⁻¹``).
+        Returns False if no piece was seen from those keyframes (nothing moved)."""
+        if not self._seen_from(deltas):
+            return False
         if len(deltas) > 8:
             self._transform_many(deltas)
-            return
+            return True
         for k, T in deltas.items():
             m = self.point_kf == k
             if np.any(m):
@@ -213,6 +216,13 @@ class ObjectEvidence:
                 self.ray_dir[m] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
             if self.gp_center is not None and self.gp_kf == k:
                 self.gp_center = T.transform_points(self.gp_center[None, :])[0]
+
+    def _seen_from(self, deltas: dict[int, Pose2]) -> bool:
+        """True if a point, a ray or the ground-plane centre was seen from a keyframe of ``deltas``."""
+        if self.gp_center is not None and self.gp_kf in deltas:
+            return True
+        ks = np.fromiter(deltas, dtype=np.int64, count=len(deltas))
+        return bool(np.isin(self.point_kf, ks).any() or np.isin(self.ray_kf, ks).any())
 
     def _transform_many(self, deltas: dict[int, Pose2]) -> None:
         """:meth:`transform` for many keyframes at once (a loop closure moves most of them): each piece

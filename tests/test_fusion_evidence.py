@@ -30,3 +30,23 @@ def test_many_keyframes_move_exactly_as_one_at_a_time() -> None:
     odd = untouched.point_kf % 2 == 1
     np.testing.assert_array_equal(a.points[odd], untouched.points[odd])
     assert not np.array_equal(a.points[~odd], untouched.points[~odd])
+
+
+def test_transform_says_whether_anything_moved() -> None:
+    """A correction of keyframes the object was never seen from leaves it as it is (and says so), so the
+    object map re-estimates only the objects that moved."""
+    ev = ObjectEvidence()
+    ev.add_points(np.array([[1.0, 0.0], [1.1, 0.0]]), kf=3)
+    ev.add_ray(np.zeros(2), np.array([1.0, 0.0]), 1.0, kf=4)
+    pts, ray_o = ev.points.copy(), ev.ray_origin.copy()
+    assert not ev.transform({5: Pose2(1.0, 0.0, 0.0)})
+    assert np.array_equal(ev.points, pts) and np.array_equal(ev.ray_origin, ray_o)
+    assert ev.transform({4: Pose2(0.5, 0.0, 0.0)})  # the ray only
+    assert np.array_equal(ev.points, pts) and ev.ray_origin[0] == np.array([0.5, 0.0])[0]
+    assert ev.transform({3: Pose2(0.0, 1.0, 0.0)})
+    np.testing.assert_allclose(ev.points, pts + [0.0, 1.0])
+    ev.add_ground_center(np.array([2.0, 2.0]), 0.9, kf=9)
+    assert ev.transform({9: Pose2(0.0, 0.0, 0.0)})  # the ground-plane centre was seen from keyframe 9
+    many = {k: Pose2(0.0, 0.0, 0.0) for k in range(20, 40)}  # > 8 keyframes: the vectorised path
+    assert not ev.transform(many)
+    assert ev.transform({**many, 3: Pose2(0.0, 0.0, 0.0)})

@@ -216,6 +216,7 @@ class ObjectEvidence:
                 self.ray_dir[m] = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
             if self.gp_center is not None and self.gp_kf == k:
                 self.gp_center = T.transform_points(self.gp_center[None, :])[0]
+        return True
 
     def _seen_from(self, deltas: dict[int, Pose2]) -> bool:
         """True if a point, a ray or the ground-plane centre was seen from a keyframe of ``deltas``."""

@@ -42,7 +42,7 @@ def test_transform_says_whether_anything_moved() -> None:
     assert not ev.transform({5: Pose2(1.0, 0.0, 0.0)})
     assert np.array_equal(ev.points, pts) and np.array_equal(ev.ray_origin, ray_o)
     assert ev.transform({4: Pose2(0.5, 0.0, 0.0)})  # the ray only
-    assert np.array_equal(ev.points, pts) and ev.ray_origin[0] == np.array([0.5, 0.0])[0]
+    assert np.array_equal(ev.points, pts) and np.array_equal(ev.ray_origin, [[0.5, 0.0]])
     assert ev.transform({3: Pose2(0.0, 1.0, 0.0)})
     np.testing.assert_allclose(ev.points, pts + [0.0, 1.0])
     ev.add_ground_center(np.array([2.0, 2.0]), 0.9, kf=9)

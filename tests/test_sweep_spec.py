@@ -104,6 +104,10 @@ def test_example_spec_is_valid():
 
     s = load_spec(PROJECT_ROOT / "assets" / "sweeps" / "six-constants.yaml")
     assert len(s.params) == 6 and s.replayable and s.trials == 200
+    for f in (PROJECT_ROOT / "assets" / "sweeps").glob("*.yaml"):  # every example the docs cite
+        load_spec(f)
+    a = load_spec(PROJECT_ROOT / "assets" / "sweeps" / "six-constants-asha.yaml")
+    assert (a.scheduler.kind, a.params, a.trials, a.seed) == ("asha", s.params, s.trials, s.seed)
 
 
 def test_oat_points_vary_one_parameter_at_a_time():

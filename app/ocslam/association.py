@@ -36,11 +36,11 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
         if t.boxes.get(stamp, cand.area_index) != cand.area_index:
             continue  # already seen in this frame through another box: another instance
         d = float(np.linalg.norm(t.footprint.center - c))
-        match = d < thr or bool(t.footprint.contains(c[None, :], margin=0.5 * thr)[0])
+        match = d < thr or t.footprint.contains_point(c, margin=0.5 * thr)
         if not match and len(cand.points):
             match = float(np.mean(t.footprint.contains(cand.points, margin=0.5 * thr))) >= 0.5
         if not match and cand.footprint is not None:
-            match = bool(cand.footprint.contains(t.footprint.center[None, :])[0])
+            match = cand.footprint.contains_point(t.footprint.center)
         if not match and (cand.source == "ground_plane" or not t.evidence.has_points) and cand.ray_origin is not None:
             # ground-plane ranging is uncertain along the line of sight (a few pixels of the bottom
             # edge), not across it

@@ -61,6 +61,14 @@ class Footprint:
         ly = -s * p[:, 0] + c * p[:, 1]
         return (np.abs(lx) <= self.size_x / 2 + margin) & (np.abs(ly) <= self.size_y / 2 + margin)
 
+    def contains_point(self, point: FloatArray, margin: float = 0.0) -> bool:
+        """:meth:`contains` for one ``(2,)`` point (the same arithmetic, without arrays)."""
+        px, py = float(point[0]) - float(self.center[0]), float(point[1]) - float(self.center[1])
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        lx = c * px + s * py
+        ly = -s * px + c * py
+        return bool(abs(lx) <= self.size_x / 2 + margin and abs(ly) <= self.size_y / 2 + margin)
+
     def nearest_distance(self, point: FloatArray) -> float:
         """Distance from a (2,) point to the rectangle (0 inside)."""
         p = np.asarray(point, dtype=np.float64) - self.center

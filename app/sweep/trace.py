@@ -56,6 +56,12 @@ class CompactGrid:
         return cls(float(g.resolution), g.origin, (int(data.shape[0]), int(data.shape[1])),
                    zlib.compress(data.tobytes(), 1), float(g.stamp), str(g.frame_id))
 
+    def same_cells(self, other: CompactGrid) -> bool:
+        """True if ``other`` decompresses to the same cells with the same geometry (its stamp may differ)."""
+        return other is self or (self.blob == other.blob and self.shape == other.shape
+                                 and self.resolution == other.resolution and self.origin == other.origin
+                                 and self.frame_id == other.frame_id)
+
     def grid(self) -> OccupancyGrid:
         data = np.frombuffer(zlib.decompress(self.blob), dtype=np.int8).reshape(self.shape)
         return OccupancyGrid(self.resolution, self.origin, data, self.stamp, self.frame_id)
@@ -176,14 +182,21 @@ def replay_trace(trace: Trace, cfg: Any) -> list:
     cons = Consciousness(cfg.consciousness, trace.camera_model)
     conf = float(cfg.detector.confidence)
     corner = bool(cfg.consciousness.corner_check)
+    last: tuple[CompactGrid, OccupancyGrid] | None = None  # the grid changes less often than the frames
     for ev in trace.events:
         try:
             if isinstance(ev, Correction):
                 cons.apply_correction(ev.pose)
                 continue
+            grid = None
+            if corner and ev.grid is not None:
+                if last is None or not last[0].same_cells(ev.grid):
+                    last = (ev.grid, ev.grid.grid())
+                elif last[0] is not ev.grid:  # the same cells: no decompression, this frame's stamp
+                    last = (ev.grid, replace(last[1], stamp=ev.grid.stamp))
+                grid = last[1]
             cons.update(filter_detections(ev.detections, conf), ev.scan, ev.T_map_base, stamp=ev.stamp,
-                        grid=ev.grid.grid() if (corner and ev.grid is not None) else None,
-                        keyframe=ev.keyframe, robot_moved=ev.robot_moved)
+                        grid=grid, keyframe=ev.keyframe, robot_moved=ev.robot_moved)
         except Exception as ex:  # as the replay: one bad message never stops it
             logging.getLogger(__name__).warning("trace %s: frame at %.3f s skipped: %s", trace.name,
                                                 getattr(ev, "stamp", float("nan")), ex)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from app.ocslam.classes import prior
 from app.ocslam.evidence import ObjectEvidence
@@ -38,3 +40,23 @@ def test_a_blob_seen_only_through_cut_boxes_is_not_extrapolated() -> None:
     assert fp is not None
     assert max(fp.size_x, fp.size_y) <= 0.25
     np.testing.assert_allclose(fp.center, [2.0, 0.0], atol=0.05)
+
+
+@given(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3), st.integers(2, 16))
+@settings(max_examples=300, deadline=None)
+def test_linspace_equals_numpys(start: float, stop: float, num: int) -> None:
+    from app.ocslam.footprint import linspace
+
+    assert np.array_equal(linspace(start, stop, num), np.linspace(start, stop, num))
+    assert np.array_equal(linspace(start, start, num), np.linspace(start, start, num))
+
+
+@given(st.lists(st.tuples(st.floats(-5, 5), st.floats(-5, 5)), min_size=1, max_size=40),
+       st.floats(-5, 5), st.floats(-5, 5), st.floats(0.05, 3), st.floats(0.05, 3), st.floats(-4, 4), st.floats(0, 0.3))
+@settings(max_examples=200, deadline=None)
+def test_contains_point_agrees_with_contains(pts, cx, cy, sx, sy, yaw, margin) -> None:
+    from app.ocslam.footprint import Footprint
+
+    fp = Footprint(np.array([cx, cy]), yaw, sx, sy)
+    p = np.array(pts, dtype=np.float64)
+    assert [fp.contains_point(q, margin) for q in p] == list(fp.contains(p, margin))

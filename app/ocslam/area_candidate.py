@@ -19,7 +19,7 @@ from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import Footprint, estimate_footprint, min_area_rect
+from app.ocslam.footprint import Footprint, estimate_footprint, linspace, min_area_rect
 from app.ocslam.islands import Island, islands_linkage
 from app.ocslam.messages import OccupancyGrid
 from app.ocslam.projection import BoundingArea
@@ -282,7 +282,7 @@ def _grid_free(
     if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
         return False
     half = pc.solid_fraction * area.half_angle
-    b = area.bearing_center + np.linspace(-half, half, 9)
+    b = area.bearing_center + linspace(-half, half, 9)
     r = r_front + max(grid.resolution, 0.05)
     probe = np.empty((9, 2))
     probe[:, 0] = area.apex[0] + r * np.cos(b)

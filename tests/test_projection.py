@@ -304,3 +304,31 @@ def test_a_frame_of_boxes_gives_the_areas_of_its_boxes_one_by_one(boxes, allow_n
                                    rtol=0, atol=1e-12)
         np.testing.assert_array_equal(a.box_px, b.box_px)
         assert a.polygon.equals_exact(b.polygon, 1e-9)
+
+
+def test_wedge_membership_by_bearing_and_range_equals_the_polygons() -> None:
+    """assign_points tests simple wedges by bearing and range about the apex, the points within 1e-8 of
+    an outline on the polygon: the same as shapely's strict containment, on the outline too."""
+    import shapely
+
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        cam = CameraModel.from_mount(INFO, camera_xyz=(float(rng.uniform(-0.1, 0.1)), 0.0, float(rng.uniform(0.1, 0.5))),
+                                     camera_rpy=(0.0, float(rng.uniform(-0.2, 0.2)), float(rng.uniform(-0.3, 0.3))),
+                                     scan_xyz=(-0.03, 0.01, 0.17), scan_yaw=float(rng.uniform(-0.3, 0.3)))
+        dets = []
+        for _k in range(int(rng.integers(1, 5))):
+            x1, x2 = sorted(rng.uniform(-20, 660, 2))
+            y1, y2 = sorted(rng.uniform(-20, 500, 2))
+            dets.append(Detection(x1, y1, x2, y2, 0, 0.9))
+        areas = bounding_areas(dets, cam, float(rng.uniform(2, 8)), near_tolerance=float(rng.choice([0.25, 2.0])))
+        pts = [rng.uniform(-8, 8, (200, 2)), np.array([[np.nan, 0.0], [np.inf, 1.0]])]
+        for a in areas:
+            ring = np.asarray(a.polygon.exterior.coords)
+            f = rng.uniform(0, 1, (len(ring) - 1, 1))
+            edges = ring[:-1] * f + ring[1:] * (1 - f)
+            pts += [ring, ring + rng.normal(size=ring.shape) * 1e-12, edges, edges + rng.normal(size=edges.shape) * 1e-9,
+                    a.apex[None, :]]
+        p = np.vstack(pts)
+        want = np.column_stack([shapely.contains_xy(a.polygon, p[:, 0], p[:, 1]) & np.isfinite(p).all(axis=1) for a in areas])
+        np.testing.assert_array_equal(assign_points(p, areas, exclusive=False), want.reshape(len(p), len(areas)))

@@ -78,3 +78,20 @@ def test_interpolate_midpoint_and_shortest_arc() -> None:
     assert abs(abs(mid[2]) - np.pi) < 1e-9  # through ±π, not through 0
     np.testing.assert_allclose(se2.interpolate(-1.0, stamps, poses), poses[0])
     np.testing.assert_allclose(se2.interpolate(9.0, stamps, poses), poses[1])
+
+
+@settings(max_examples=60, deadline=None)
+@given(poses, st.lists(st.tuples(coord, coord), min_size=2, max_size=12))
+def test_scalar_paths_equal_the_vectorised_ones_to_the_bit(a: Pose2, pts: list[tuple[float, float]]) -> None:
+    # Pose2's methods compute on Python floats, one point without arrays: the same IEEE operations
+    p = np.array(pts)
+    many = a.transform_points(p)
+    for i in range(len(p)):
+        assert a.transform_points(p[i]).tolist() == [many[i].tolist()]
+    c, s = np.cos(np.float64(a.yaw)), np.sin(np.float64(a.yaw))
+    np.testing.assert_array_equal(many[:, 0], c * p[:, 0] - s * p[:, 1] + a.x)
+    np.testing.assert_array_equal(many[:, 1], s * p[:, 0] + c * p[:, 1] + a.y)
+    b = Pose2(*pts[0], a.yaw / 3.0)
+    assert tuple(a @ b) == tuple(se2.compose(a.as_array(), b.as_array()).tolist())
+    assert tuple(a.inverse()) == tuple(se2.inverse(a.as_array()).tolist())
+    assert wrap_angle(a.yaw * 7.0) == float(wrap_angle(np.array([a.yaw * 7.0]))[0])

@@ -12,6 +12,7 @@ frame is z forward, x right, y down; ``base_scan`` is the LIDAR frame (assumed l
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -94,6 +95,17 @@ class CameraModel:
     def R_base_optical(self) -> FloatArray:
         return self.T_base_optical[:3, :3]
 
+    @cached_property
+    def _R_rays(self) -> tuple[FloatArray, FloatArray]:
+        """``(K⁻¹ᵀ, Rᵀ)``: the matrices :meth:`pixel_rays` applies, in its order (one lookup a call)."""
+        return self.K_inv.T, self.R_base_optical.T
+
+    @cached_property
+    def _scan_rotation(self) -> tuple[float, float]:
+        """``(cos, sin)`` of the rotation from ``base_footprint`` to ``base_scan`` (``−yaw`` of the LIDAR)."""
+        yaw = -self.T_base_scan_2d.yaw
+        return math.cos(yaw), math.sin(yaw)
+
     @property
     def center_base(self) -> FloatArray:
         """(3,) camera centre in ``base_footprint``."""
@@ -123,7 +135,10 @@ class CameraModel:
     def project(self, points_base: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(N, 3)`` base points → ``(N, 2)`` pixels ``(u, v)`` and ``(N,)`` optical depths (≤ 0: behind)."""
         p = np.asarray(points_base, dtype=np.float64).reshape(-1, 3)
-        h = np.hstack([p, np.ones((len(p), 1))]) @ self.P.T
+        hp = np.empty((len(p), 4))
+        hp[:, :3] = p
+        hp[:, 3] = 1.0
+        h = hp @ self.P.T
         z = h[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = h[:, :2] / z[:, None]
@@ -132,8 +147,13 @@ class CameraModel:
     def pixel_rays(self, uv: FloatArray) -> FloatArray:
         """``(N, 2)`` pixels → ``(N, 3)`` unit ray directions in ``base_footprint``."""
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        d = np.hstack([uv, np.ones((len(uv), 1))]) @ self.K_inv.T @ self.R_base_optical.T
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        h = np.empty((len(uv), 3))
+        h[:, :2] = uv
+        h[:, 2] = 1.0
+        K_inv_T, R_T = self._R_rays
+        d = h @ K_inv_T @ R_T
+        sq = d * d  # the norm as np.linalg.norm sums it: ((x² + y²) + z²)
+        return d / np.sqrt(sq[:, 0] + sq[:, 1] + sq[:, 2])[:, None]
 
     def rays_to_plane(self, uv: FloatArray, z: float) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Intersect the rays of ``(N, 2)`` pixels with the horizontal plane at height ``z`` (base frame).
@@ -167,44 +187,73 @@ class CameraModel:
     def column_directions_base(self, u: FloatArray) -> FloatArray:
         """``(N,)`` image columns → ``(N, 2)`` unit directions of their half-lines on the LIDAR plane (base)."""
         u = np.asarray(u, dtype=np.float64).reshape(-1)
-        cy = self.info.cy
-        d = self.pixel_rays(np.stack([u, np.full_like(u, cy)], axis=1))
-        y = self.R_base_optical[:, 1]
+        uv = np.empty((len(u), 2))
+        uv[:, 0] = u
+        uv[:, 1] = self.info.cy
+        d = self.pixel_rays(uv)
+        y0, y1, y2 = self.R_base_optical[:, 1].tolist()
         # n = y × d, then the line direction n × e_z = (n_y, −n_x)
-        nx = y[1] * d[:, 2] - y[2] * d[:, 1]
-        ny = y[2] * d[:, 0] - y[0] * d[:, 2]
-        line = np.stack([ny, -nx], axis=1)
-        norm = np.linalg.norm(line, axis=1, keepdims=True)
-        fallback = d[:, :2] / np.maximum(np.linalg.norm(d[:, :2], axis=1, keepdims=True), 1e-12)
-        line = np.where(norm > 1e-9, line / np.maximum(norm, 1e-12), fallback)
-        sign = np.sign(np.sum(line * d[:, :2], axis=1))
+        line = np.empty((len(u), 2))
+        line[:, 0] = y2 * d[:, 0] - y0 * d[:, 2]
+        line[:, 1] = -(y1 * d[:, 2] - y2 * d[:, 1])
+        sq = line * line
+        norm = np.sqrt(sq[:, 0] + sq[:, 1])[:, None]
+        if np.all(norm > 1e-9):
+            line /= np.maximum(norm, 1e-12)
+        else:  # a column in the plane of the camera's vertical axis and its ray: the ray's own direction
+            dn = d[:, :2] * d[:, :2]
+            fallback = d[:, :2] / np.maximum(np.sqrt(dn[:, 0] + dn[:, 1])[:, None], 1e-12)
+            line = np.where(norm > 1e-9, line / np.maximum(norm, 1e-12), fallback)
+        sign = np.sign(line[:, 0] * d[:, 0] + line[:, 1] * d[:, 1])
         sign[sign == 0] = 1.0
-        return line * sign[:, None]
+        line *= sign[:, None]
+        return line
+
+    def _columns_scan_xy(self, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`column_directions_scan` as its two ``(N,)`` coordinate columns."""
+        d = self.column_directions_base(u)
+        c, s = self._scan_rotation
+        dx, dy = d[:, 0], d[:, 1]
+        return c * dx - s * dy, s * dx + c * dy
 
     def column_directions_scan(self, u: FloatArray) -> FloatArray:
         """``(N,)`` columns → ``(N, 2)`` unit half-line directions in ``base_scan``."""
-        d = self.column_directions_base(u)
-        c, s = np.cos(-self.T_base_scan_2d.yaw), np.sin(-self.T_base_scan_2d.yaw)
-        return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
+        x, y = self._columns_scan_xy(u)
+        out = np.empty((len(x), 2))
+        out[:, 0] = x
+        out[:, 1] = y
+        return out
 
     def column_bearings_scan(self, u: FloatArray) -> FloatArray:
         """``(N,)`` columns → ``(N,)`` bearings (rad) of their half-lines about the apex, in ``base_scan``."""
-        d = self.column_directions_scan(u)
-        return np.arctan2(d[:, 1], d[:, 0])
+        x, y = self._columns_scan_xy(u)
+        return np.arctan2(y, x)
 
     def ground_ranges(self, uv: FloatArray) -> FloatArray:
         """``(N, 2)`` pixels → ``(N,)`` horizontal distance from the apex to where the ray meets the floor.
 
         ``inf`` for rays at or above the horizon.
         """
-        p, ok = self.rays_to_plane(uv, 0.0)
-        r = np.linalg.norm(p[:, :2] - self.apex_base[None, :], axis=1)
-        return np.where(ok, r, np.inf)
+        d = self.pixel_rays(uv)
+        c = self.center_base
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (0.0 - c[2]) / d[:, 2]
+        ok = np.isfinite(s) & (s > 0.0)
+        s[~ok] = np.nan
+        # rays_to_plane's x and y, less the apex: the norm as np.linalg.norm sums it (x² + y²)
+        ax, ay = self.apex_base.tolist()
+        x = c[0] + s * d[:, 0] - ax
+        y = c[1] + s * d[:, 1] - ay
+        r = np.sqrt(x * x + y * y)
+        r[~ok] = np.inf
+        return r
 
     def bearing_ranges_scan(self, points_scan: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(N, 2)`` points in ``base_scan`` → ``(N,)`` bearings and ``(N,)`` ranges about the apex."""
-        d = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2) - self.apex_scan[None, :]
-        return np.arctan2(d[:, 1], d[:, 0]), np.hypot(d[:, 0], d[:, 1])
+        p = np.asarray(points_scan, dtype=np.float64).reshape(-1, 2)
+        ax, ay = self.apex_scan.tolist()
+        dx, dy = p[:, 0] - ax, p[:, 1] - ay
+        return np.arctan2(dy, dx), np.hypot(dx, dy)
 
 
 def ground_plane_point(u: float, v: float, camera: CameraModel) -> tuple[float, float] | None:

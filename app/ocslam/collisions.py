@@ -5,6 +5,7 @@ Within one frame between the candidates of its boxes, and after the updates betw
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -30,6 +31,9 @@ from app.ocslam.tracks import (
 FloatArray = NDArray[np.float64]
 
 
+_TWO_DEGREES = np.deg2rad(2.0)
+
+
 def ownership_order(areas: Sequence[BoundingArea]) -> list[int]:
     """The order in which a frame's boxes choose their objects: the most constrained first.
 
@@ -40,8 +44,8 @@ def ownership_order(areas: Sequence[BoundingArea]) -> list[int]:
 
     def key(k: int) -> tuple[float, float, float, int]:
         a = areas[k]
-        r = float(a.near_range_lo) if np.isfinite(a.near_range_lo) else 0.0
-        return (round(float(a.half_angle) / np.deg2rad(2.0)), r, -a.confidence, k)
+        r = float(a.near_range_lo) if math.isfinite(a.near_range_lo) else 0.0
+        return (round(float(a.half_angle) / _TWO_DEGREES), r, -a.confidence, k)
 
     return sorted(range(len(areas)), key=key)
 
@@ -70,11 +74,27 @@ def one_instance(a: Track, b: Track) -> bool:
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
 
 
+#: Point sets up to this many pairs are compared all pairs at once, larger ones on KD-trees.
+_ALL_PAIRS_MAX = 40_000
+
+
 def shared_fractions(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> tuple[float, float]:
-    """``(share of a's points on b's, share of b's on a's)``, "on" = within half the island gap."""
+    """``(share of a's points on b's, share of b's on a's)``, "on" = within half the island gap.
+
+    Small sets compare all pairs' squared distances; a pair within a relative 1e-9 of the gap (where
+    the rounding of the distance might decide) sends the whole test to the KD-trees' distances."""
     if len(a) == 0 or len(b) == 0:
         return 0.0, 0.0
     gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    if len(a) * len(b) <= _ALL_PAIRS_MAX:
+        dx = a[:, 0, None] - b[None, :, 0]
+        dy = a[:, 1, None] - b[None, :, 1]
+        d2 = dx * dx + dy * dy
+        da2, db2 = d2.min(axis=1), d2.min(axis=0)
+        g2 = gap * gap
+        if not (np.abs(np.concatenate([da2, db2]) - g2) <= 1e-9 * g2).any():
+            # the shares as np.mean gives them: the count over the size, one rounding
+            return np.count_nonzero(da2 < g2) / len(a), np.count_nonzero(db2 < g2) / len(b)
     da, _ = cKDTree(b).query(a, k=1)
     db, _ = cKDTree(a).query(b, k=1)
     return float(np.mean(da <= gap)), float(np.mean(db <= gap))
@@ -165,20 +185,36 @@ def resolve_track_collisions(
     thr = float(cfg.tracking_threshold_m)
     ov = float(cfg.overlap_fraction)
     removed: set[int] = set()
+    if not touched:
+        return tracks
+    order = list(tracks)
+    # the footprints now, for a quick test of every pair at once: pairs surely farther apart than
+    # their reach are skipped (a footprint re-estimated since then is tested one by one)
+    fps = [t.footprint for t in order]
+    centers = np.array([fp.center if fp is not None else (np.nan, np.nan) for fp in fps], dtype=np.float64).reshape(-1, 2)
+    radii = np.hypot([fp.size_x if fp is not None else np.nan for fp in fps],
+                     [fp.size_y if fp is not None else np.nan for fp in fps])
     for a in touched:
         if a.id in removed or a.footprint is None:
             continue
-        for b in list(tracks):
+        fa0 = a.footprint
+        gaps = np.hypot(centers[:, 0] - fa0.center[0], centers[:, 1] - fa0.center[1])
+        far_apart = (gaps > 0.5 * (float(np.hypot(fa0.size_x, fa0.size_y)) + radii) + thr + 1e-6).tolist()
+        for k, b in enumerate(order):
             fa, fb = a.footprint, b.footprint  # a's may be re-estimated by a merge, never unset
+            if far_apart[k] and fa is fa0 and fb is fps[k]:
+                continue  # d > reach + thr below, surely
             if b is a or b.id in removed or fa is None or fb is None:
                 continue
             d = float(np.linalg.norm(fa.center - fb.center))
             reach = 0.5 * (np.hypot(fa.size_x, fa.size_y) + np.hypot(fb.size_x, fb.size_y))
             if d > reach + thr:
                 continue
-            frac = overlap_fraction(fa, fb)
+            # the footprints' overlap_fraction is computed only on the branches that use it
             if a.label == b.label:
-                same = d < thr or frac >= ov
+                if co_observed(a, b):
+                    continue  # seen side by side through two boxes in one frame: two objects, however close
+                same = d < thr or overlap_fraction(fa, fb) >= ov
                 if same and cfg.point_ownership and not one_instance(a, b):
                     same = False  # overlapping, but together larger than any instance: two objects
                 if not same:
@@ -191,8 +227,6 @@ def resolve_track_collisions(
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)
                     if len(gp.evidence.ray_origin):
                         same = along_ray_close(gp.evidence.ray_origin[-1], gp_fp.center, other_fp.center, thr)
-                if same and co_observed(a, b):
-                    same = False  # seen side by side through two boxes in one frame: two objects
                 if same:
                     keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
                     merge_tracks(keep, drop, cfg, known_free)
@@ -222,7 +256,7 @@ def resolve_track_collisions(
                 rep.removed += 1
                 if drop is a:
                     break
-            elif frac >= max(ov, 0.5):
+            elif overlap_fraction(fa, fb) >= max(ov, 0.5):
                 both_now = a.touched_stamp == stamp and b.touched_stamp == stamp
                 if both_now and abs(a.near_range - b.near_range) > 1e-6:
                     drop = b if a.near_range < b.near_range else a

@@ -38,32 +38,37 @@ def decay_tracks(
 ) -> list[Track]:
     """Ghost decay; returns the tracks that remain (presence > 0).
 
-    The per-track tests that need no scan (explained by a box's wedge, in the camera's view) run for
-    every track at once; the occlusion test only for the tracks still missed."""
+    The per-track tests that need no scan run for every track at once: in the camera's view, then
+    explained by a box's wedge for those in view; the occlusion test only for the tracks still missed."""
     T_scan_map = T_map_scan.inverse()
     T_base_map = T_map_base.inverse()
     labels = {a.label for a in areas}
-    cand = [i for i, t in enumerate(tracks) if t.footprint is not None and t.touched_stamp != stamp]
-    missed = np.zeros(len(tracks), dtype=bool)
+    cand = [t for t in tracks if t.footprint is not None and t.touched_stamp != stamp]
+    missed: set[int] = set()  # ids of the tracks in clear view that no box explains
     if cand:
-        fps = [tracks[i].footprint for i in cand]
-        centers = np.array([fp.center for fp in fps if fp is not None], dtype=np.float64).reshape(-1, 2)
-        # explained by a box of its class whose wedge holds it
-        explained = np.zeros(len(cand), dtype=bool)
-        boxed = np.array([tracks[i].label in labels for i in cand])
-        if np.any(boxed):
+        centers = np.array([t.footprint.center for t in cand if t.footprint is not None], dtype=np.float64).reshape(-1, 2)
+        heights = np.array([t.prior.height[1] for t in cand], dtype=np.float64)
+        in_view = centers_in_camera_view(centers, heights, T_base_map, cam, float(cfg.decay_max_range_m))
+        view = np.flatnonzero(in_view).tolist()
+        # of those, the ones explained by a box of their class whose wedge holds them
+        boxed = [k for k in view if cand[k].label in labels]
+        explained: set[int] = set()
+        if boxed:
             b, _r = cam.bearing_ranges_scan(T_scan_map.transform_points(centers[boxed]))
             held = np.zeros(len(b), dtype=bool)
-            cand_labels = np.array([tracks[i].label for i in cand], dtype=object)[boxed]
-            for a in areas:
-                held |= (cand_labels == a.label) & a.contains_bearing(b, margin=0.05)
-            explained[np.flatnonzero(boxed)] = held
-        heights = np.array([tracks[i].prior.height[1] for i in cand], dtype=np.float64)
-        in_view = centers_in_camera_view(centers, heights, T_base_map, cam, float(cfg.decay_max_range_m))
-        missed[np.asarray(cand)[~explained & in_view]] = True
+            for label in labels:
+                rows = [r for r, k in enumerate(boxed) if cand[k].label == label]
+                if rows:
+                    for a in areas:
+                        if a.label == label:
+                            held[rows] |= a.contains_bearing(b[rows], margin=0.05)
+            explained = {boxed[r] for r in np.flatnonzero(held).tolist()}
+        missed = {id(cand[k]) for k in view if k not in explained}
+    if not missed:
+        return list(tracks)
     keep = []
-    for i, t in enumerate(tracks):
-        if not missed[i]:
+    for t in tracks:
+        if id(t) not in missed:
             keep.append(t)
             continue
         fp = t.footprint

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -74,7 +75,7 @@ class Island:
     @property
     def physical_extent(self) -> float:
         """Extent of the physical cluster: ``full_extent`` if known, else the island's own."""
-        return self.full_extent if np.isfinite(self.full_extent) else self.extent
+        return self.full_extent if math.isfinite(self.full_extent) else self.extent
 
     def __len__(self) -> int:
         return len(self.points)
@@ -87,26 +88,40 @@ def components(n: int, i: NDArray[np.int64], j: NDArray[np.int64]) -> tuple[int,
     lowest node (the numbering of ``scipy.sparse.csgraph.connected_components``). Union-find by
     hooking roots to the lower root and pointer jumping, in numpy: a few vector passes instead of
     scipy's sparse-matrix construction and validation, which cost more than the search itself on the
-    small graphs here (a scan's few hundred points).
+    small graphs here (a scan's few hundred points). The edges between consecutive nodes (most of a
+    scan's: its points come in scan order) first join their runs in one pass, so the chains they form
+    need no pointer jumping.
     """
-    parent = np.arange(n, dtype=np.int64)
+    nodes = np.arange(n, dtype=np.int64)
     i = np.asarray(i, dtype=np.int64).reshape(-1)
     j = np.asarray(j, dtype=np.int64).reshape(-1)
+    if len(i) == 0:
+        return n, nodes
+    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    consecutive = hi - lo == 1
+    joined = np.zeros(n, dtype=bool)  # joined[k]: an edge (k − 1, k)
+    joined[hi[consecutive]] = True
+    parent = np.maximum.accumulate(np.where(joined, 0, nodes))  # the first node of each run
+    others = ~consecutive
+    i, j = lo[others], hi[others]
     while len(i):
         ri, rj = parent[i], parent[j]
         differ = ri != rj
-        if not np.any(differ):
+        if not differ.any():
             break
         ri, rj = ri[differ], rj[differ]
         i, j = i[differ], j[differ]
         np.minimum.at(parent, np.maximum(ri, rj), np.minimum(ri, rj))
         while True:  # pointer jumping: every node points at its root
             nxt = parent[parent]
-            if not (nxt != parent).any():
+            if (nxt == parent).all():
                 break
             parent = nxt
-    roots, labels = np.unique(parent, return_inverse=True)
-    return len(roots), labels.reshape(-1).astype(np.int64)
+    # every root is its component's lowest node (parents only ever decrease): number the roots in order
+    roots = np.flatnonzero(parent == nodes)
+    rank = np.empty(n, dtype=np.int64)
+    rank[roots] = np.arange(len(roots))
+    return len(roots), rank[parent]
 
 
 def cluster_extents(
@@ -130,32 +145,45 @@ def cluster_extents(
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     n = len(pts)
-    labels = np.full(n, -1, dtype=np.int64)
     if n == 0:
-        return labels, np.zeros(0)
-    if pairs_within_gap is not None:  # the caller's close_pairs(points, gap_m)
-        pairs = [np.asarray(pairs_within_gap, dtype=np.int64).reshape(-1, 2)] if n > 1 else []
-    else:
-        pairs = [close_pairs(pts, gap_m)] if n > 1 else []
+        return np.full(0, -1, dtype=np.int64), np.zeros(0)
+    # the edges, as their two ends (the components do not depend on their order)
+    ends_i: list[NDArray[np.int64]] = []
+    ends_j: list[NDArray[np.int64]] = []
+    if n > 1:
+        pairs = (np.asarray(pairs_within_gap, dtype=np.int64).reshape(-1, 2) if pairs_within_gap is not None
+                 else close_pairs(pts, gap_m))  # the caller's close_pairs(points, gap_m), or ours
+        ends_i.append(pairs[:, 0])
+        ends_j.append(pairs[:, 1])
     if beam_index is not None and n > 1 and angle_increment > 0.0:
         bi = np.asarray(beam_index, dtype=np.int64)
-        nxt = np.roll(np.arange(n), -1)
+        nxt = np.arange(1, n + 1)  # the next point in scan order (the last one's: the first)
+        nxt[-1] = 0
         step = (bi[nxt] - bi) % max(n_beams, 1) if n_beams else bi[nxt] - bi
         adjacent = step == 1
         r = np.hypot(pts[:, 0], pts[:, 1])
         dphi = abs(angle_increment)
         lam = np.deg2rad(max_incidence_deg)
         dmax = r * np.sin(dphi) / np.sin(max(lam - dphi, 1e-3)) + 3.0 * sigma_m
-        dist = np.hypot(*(pts[nxt] - pts).T)
-        ok = adjacent & (dist <= np.maximum(dmax, gap_m))
-        pairs.append(np.stack([np.arange(n)[ok], nxt[ok]], axis=1))
-    edges = np.vstack([p for p in pairs if len(p)]) if any(len(p) for p in pairs) else np.zeros((0, 2), dtype=np.int64)
-    _, labels = components(n, edges[:, 0], edges[:, 1])
-    lo = np.full((labels.max() + 1, 2), np.inf)
-    hi = np.full((labels.max() + 1, 2), -np.inf)
-    np.minimum.at(lo, labels, pts)
-    np.maximum.at(hi, labels, pts)
-    return labels.astype(np.int64), np.hypot(*(hi - lo).T)
+        d = pts[nxt] - pts
+        dist = np.hypot(d[:, 0], d[:, 1])
+        ok = np.flatnonzero(adjacent & (dist <= np.maximum(dmax, gap_m)))
+        ends_i.append(ok)
+        ends_j.append(nxt[ok])
+    if ends_i:
+        n_clusters, labels = components(n, np.concatenate(ends_i), np.concatenate(ends_j))
+    else:
+        n_clusters, labels = n, np.arange(n, dtype=np.int64)
+    # per-cluster bounds of x and y, as one flat array (element 2·c + axis)
+    flat = np.empty(2 * n, dtype=np.int64)
+    flat[0::2] = 2 * labels
+    flat[1::2] = flat[0::2] + 1
+    lo = np.full(2 * n_clusters, np.inf)
+    hi = np.full(2 * n_clusters, -np.inf)
+    np.minimum.at(lo, flat, pts.reshape(-1))
+    np.maximum.at(hi, flat, pts.reshape(-1))
+    span = hi - lo
+    return labels, np.hypot(span[0::2], span[1::2])
 
 
 def close_pairs(points: FloatArray, gap_m: float) -> NDArray[np.int64]:
@@ -191,11 +219,16 @@ def islands_linkage(
     else:
         pairs = close_pairs(pts, gap_m)
     n_comp, labels = components(n, pairs[:, 0], pairs[:, 1])
-    out = []
-    for c in range(n_comp):
-        m = labels == c
-        out.append(Island(pts[m], idx[m], buffer_m=gap_m / 2.0))
-    out.sort(key=lambda isl: int(isl.indices.min()))
+    if n_comp == 1:
+        return [Island(pts.copy(), idx.copy(), buffer_m=gap_m / 2.0)]
+    # the points grouped by island, each in its original order
+    order = np.argsort(labels, kind="stable")
+    ends = np.cumsum(np.bincount(labels, minlength=n_comp)).tolist()
+    pts_by, idx_by = pts[order], idx[order]
+    out = [Island(pts_by[a:b].copy(), idx_by[a:b].copy(), buffer_m=gap_m / 2.0) for a, b in zip([0, *ends[:-1]], ends)]
+    if n_comp > 1 and not (idx[1:] >= idx[:-1]).all():
+        # components come numbered by their lowest position in ``indices``: in scan order when it is sorted
+        out.sort(key=lambda isl: int(isl.indices.min()))
     return out
 
 

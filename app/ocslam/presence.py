@@ -69,15 +69,19 @@ def centers_in_camera_view(
     ``T_base_frame``: the frame's pose in ``base_footprint`` (the inverse of ``T_frame_base``).
     Returns ``(N,)`` True where the centre is in view."""
     c_base = T_base_frame.transform_points(centers)
-    z = np.clip(0.5 * np.asarray(heights_m, dtype=np.float64).reshape(-1), 0.02, 1.0)
-    uv, depth = camera.project(np.column_stack([c_base, z]))
+    p = np.empty((len(c_base), 3))
+    p[:, :2] = c_base
+    p[:, 2] = np.minimum(np.maximum(0.5 * np.asarray(heights_m, dtype=np.float64).reshape(-1), 0.02), 1.0)
+    uv, depth = camera.project(p)
     W, H = camera.info.width, camera.info.height
+    u, v = uv[:, 0], uv[:, 1]
     with np.errstate(invalid="ignore"):
         ok = depth > 0.05
-        ok &= (margin_frac * W <= uv[:, 0]) & (uv[:, 0] <= (1.0 - margin_frac) * W)
-        ok &= (0.0 <= uv[:, 1]) & (uv[:, 1] <= H)
-    rel = c_base - camera.center_base[:2][None, :]
-    return ok & (np.hypot(rel[:, 0], rel[:, 1]) <= max_range_m)
+        ok &= (margin_frac * W <= u) & (u <= (1.0 - margin_frac) * W)
+        ok &= (0.0 <= v) & (v <= H)
+    cx, cy = camera.center_base[:2].tolist()
+    ok &= np.hypot(c_base[:, 0] - cx, c_base[:, 1] - cy) <= max_range_m
+    return ok
 
 
 def occluded_by_scan(

@@ -4,16 +4,19 @@ Improved geometry (default), on the half-lines of the image columns (:class:`~ap
 a box ``(x1, y1, x2, y2)`` becomes the wedge between the half-lines of its left and right edges,
 starting at the *near range* where the ray through its bottom edge meets the floor (``z = 0``), and
 ending at ``max_range_m``. The *bisector* is the half-line of the box's centre column. All areas are
-shapely polygons in the ``base_scan`` frame (2D, metres). :func:`assign_points` gives each LIDAR point
-to the area that explains it best.
+shapely polygons in the ``base_scan`` frame (2D, metres), built when first asked for (the fusion itself
+tests membership by bearing and range, :func:`assign_points`). :func:`assign_points` gives each LIDAR
+point to the area that explains it best.
 
 The original implementation's formulas (seed mode) are in :mod:`app.ocslam.seed_projection`.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -33,18 +36,19 @@ _ARC_SEGMENTS = 12
 class BoundingArea:
     """One detection projected onto the LIDAR plane (all geometry in ``base_scan``).
 
-    ``polygon``: the wedge; ``apex``: (2,) its tip; ``bearing_left``/``bearing_right``/``bearing_center``:
-    bearings (rad) of the half-lines through the box's left edge, right edge and centre column;
+    ``polygon``: the wedge (built on first use, from the fields below); ``apex``: (2,) its tip;
+    ``bearing_left``/``bearing_right``/``bearing_center``: bearings (rad) of the half-lines through the
+    box's left edge, right edge and centre column;
     ``near_range_m``: distance from the apex to the floor point under the box's bottom edge
     (``inf`` if the bottom edge is at or above the horizon); ``near_range_lo``/``near_range_hi``: the same
     with the bottom edge moved down/up by the pixel margin; ``far_range_m``: the wedge's far arc;
     ``bisector``: (2, 2) segment ``[apex, apex + far·dir_center]``; ``truncated``: which box edges touch
     the image border (``left``, ``right``, ``top``, ``bottom``); ``box_px``: the box clipped to the image,
-    in the camera's pixel grid; ``points``: the LIDAR points it received in the last update.
+    in the camera's pixel grid; ``points``: the LIDAR points it received in the last update;
+    ``polygon_near_m``: the range where the polygon starts (its near arc; 0: a fan from the apex).
     """
 
     detection: Detection
-    polygon: Polygon
     apex: FloatArray
     bearing_left: float
     bearing_right: float
@@ -57,6 +61,17 @@ class BoundingArea:
     truncated: dict[str, bool] = field(default_factory=dict)
     box_px: FloatArray = field(default_factory=lambda: np.zeros(4))  # (x1, y1, x2, y2) clipped, camera pixels
     points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # (K, 2) LIDAR points it received
+    polygon_near_m: float = 0.0
+
+    @cached_property
+    def polygon(self) -> Polygon:
+        """The wedge as a shapely polygon (``base_scan``)."""
+        return _wedge_polygon(self.apex, self.bearing_left, self.bearing_right, self.polygon_near_m, self.far_range_m)
+
+    @cached_property
+    def _wedge_test(self) -> _WedgeTest | None:
+        """The constants of the exact membership test of :func:`_in_wedges` (``None``: not a simple wedge)."""
+        return _wedge_test(self.apex, self.bearing_left, self.bearing_right, self.polygon_near_m, self.far_range_m)
 
     @property
     def label(self) -> str:
@@ -103,6 +118,8 @@ class BoundingArea:
 
 
 def _angle_diff(a, b):
+    if isinstance(a, float) and isinstance(b, float):  # scalars: Python's float ``%`` is numpy's, with less overhead
+        return (a - b + math.pi) % (2.0 * math.pi) - math.pi
     return (np.asarray(a) - np.asarray(b) + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -116,14 +133,90 @@ def _wedge_polygon(apex: FloatArray, b_left: float, b_right: float, r_near: floa
     else:
         ring = np.vstack([far, apex[None, :]])
     poly = Polygon(ring)
-    # an annular sector (or a fan from the apex) narrower than a half-turn with distinct arcs is a simple
-    # ring: valid by construction, so GEOS' validity test (a third of the wedge's cost) is skipped
-    simple = 1e-3 < span < np.pi - 1e-3 and r_far - max(r_near, 0.0) > 1e-3 and np.all(np.isfinite(ring))
+    # a simple wedge's ring is valid by construction, so GEOS' validity test (a third of the wedge's
+    # cost) is skipped
+    simple = _simple_wedge(span, r_near, r_far) and np.all(np.isfinite(ring))
     if not simple and not poly.is_valid:
         poly = shapely.make_valid(poly)
         if not isinstance(poly, Polygon):
             poly = Polygon(ring).buffer(0)
     return poly
+
+
+def _simple_wedge(span: float, r_near: float, r_far: float) -> bool:
+    """An annular sector (or a fan from the apex) narrower than a half-turn with distinct arcs: its ring
+    is simple, so valid by construction (and convex but for the near arc)."""
+    return 1e-3 < span < np.pi - 1e-3 and r_far - max(r_near, 0.0) > 1e-3
+
+
+@dataclass(slots=True)
+class _WedgeTest:
+    """A simple wedge polygon (:func:`_wedge_polygon`) as bearing and range bounds about its apex.
+
+    ``t0``/``span``: the bearing of its right edge and the angle to its left edge; ``cos_m``/``sin_m``:
+    ``(S,)`` the directions of its arc chords' normals (at the chords' mid bearings); ``far_d``/``near_d``:
+    the distance of its far and near chords from the apex (``near_d`` ``None``: a fan from the apex)."""
+
+    apex: tuple[float, float]
+    t0: float
+    span: float
+    cos_m: FloatArray
+    sin_m: FloatArray
+    far_d: float
+    near_d: float | None
+
+
+#: The arc chords' mid bearings, in chord widths from the right edge.
+_CHORD_MIDS = np.arange(_ARC_SEGMENTS, dtype=np.float64) + 0.5
+
+
+def _wedge_test(apex: FloatArray, b_left: float, b_right: float, r_near: float, r_far: float) -> _WedgeTest | None:
+    """:class:`_WedgeTest` of :func:`_wedge_polygon`'s polygon; ``None`` if it is not a simple wedge.
+
+    Its arc vertices are at ``b_right + np.linspace(0, span, S + 1)``: chords of width ``span / S``
+    (to the last bit, far below ``_WEDGE_EPS``)."""
+    span = float(_angle_diff(b_left, b_right))
+    ax, ay = float(apex[0]), float(apex[1])
+    if not (_simple_wedge(span, r_near, r_far) and math.isfinite(ax) and math.isfinite(ay) and math.isfinite(b_right)
+            and math.isfinite(r_near) and math.isfinite(r_far)):
+        return None
+    step = span / _ARC_SEGMENTS
+    m = _CHORD_MIDS * step + b_right
+    ch = math.cos(0.5 * step)
+    return _WedgeTest((ax, ay), b_right, span, np.cos(m), np.sin(m), r_far * ch, r_near * ch if r_near > 1e-6 else None)
+
+
+#: Points closer than this (m, rad) to a wedge's outline are tested on its polygon (shapely).
+_WEDGE_EPS = 1e-8
+
+
+def _in_wedges(pts: FloatArray, tests: Sequence[_WedgeTest]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """``(N, 2)`` finite points, ``A`` wedges with one apex → ``(N, A)`` strictly inside, and ``(N, A)``
+    too near the outline to tell (within ``_WEDGE_EPS``, or on the apex; the polygon decides those).
+
+    The polygon is convex but for its near arc: a point is inside when its bearing about the apex lies
+    between the edges' and, for every arc chord, its projection on the chord's normal is short of the
+    far chord's distance; and (an annular sector) beyond the near chord's distance for some chord. The
+    smallest of these margins is positive inside, negative outside.
+    """
+    ax, ay = tests[0].apex
+    dx, dy = pts[:, 0] - ax, pts[:, 1] - ay
+    theta = np.arctan2(dy, dx)
+    inside = np.zeros((len(pts), len(tests)), dtype=bool)
+    unsure = np.zeros((len(pts), len(tests)), dtype=bool)
+    for k, w in enumerate(tests):
+        a = (theta - w.t0 + np.pi) % (2.0 * np.pi) - np.pi  # bearing from the right edge
+        rows = np.flatnonzero((a > -_WEDGE_EPS) & (a < w.span + _WEDGE_EPS))  # the others: surely outside
+        if len(rows) == 0:
+            continue
+        a, x, y = a[rows], dx[rows], dy[rows]
+        proj = (x[:, None] * w.cos_m[None, :] + y[:, None] * w.sin_m[None, :]).max(axis=1)
+        margin = np.minimum(np.minimum(a, w.span - a), w.far_d - proj)
+        if w.near_d is not None:
+            margin = np.minimum(margin, proj - w.near_d)
+        inside[rows, k] = margin > 0.0
+        unsure[rows, k] = (np.abs(margin) < _WEDGE_EPS) | (np.abs(x) + np.abs(y) < _WEDGE_EPS)
+    return inside, unsure
 
 
 def box_scale(detections: Detections, width: float, height: float) -> tuple[float, float]:
@@ -156,6 +249,12 @@ def area_from_box(
     return _areas_from_boxes([det], camera, max_range_m, bottom_margin_px, edge_margin_px, near_tolerance)[0]
 
 
+def _clip(v: float, hi: float) -> float:
+    """``np.clip(v, 0, hi)`` of a finite float (numpy's comparisons, so ``-0.0`` clips to ``0.0`` as there)."""
+    v = v if v > 0.0 else 0.0
+    return float(v if v < hi else hi)
+
+
 def _areas_from_boxes(
     dets: Sequence[Detection],
     camera: CameraModel,
@@ -168,53 +267,58 @@ def _areas_from_boxes(
     W, H = camera.info.width, camera.info.height
     boxes: list[tuple[int, float, float, float, float]] = []
     for i, det in enumerate(dets):
-        vals = np.array([det.x1, det.y1, det.x2, det.y2], dtype=np.float64)
-        if not np.all(np.isfinite(vals)):
+        x1, y1, x2, y2 = float(det.x1), float(det.y1), float(det.x2), float(det.y2)
+        if not (math.isfinite(x1) and math.isfinite(y1) and math.isfinite(x2) and math.isfinite(y2)):
             continue
-        x1, x2 = np.clip(sorted((vals[0], vals[2])), 0.0, W)
-        y1, y2 = np.clip(sorted((vals[1], vals[3])), 0.0, H)
+        x1, x2 = (x1, x2) if x1 <= x2 else (x2, x1)
+        y1, y2 = (y1, y2) if y1 <= y2 else (y2, y1)
+        x1, x2, y1, y2 = _clip(x1, W), _clip(x2, W), _clip(y1, H), _clip(y2, H)
         if x2 - x1 < 1.0 or y2 - y1 < 1.0:
             continue
-        boxes.append((i, float(x1), float(y1), float(x2), float(y2)))
+        boxes.append((i, x1, y1, x2, y2))
     out: list[BoundingArea | None] = [None] * len(dets)
-    if boxes:
-        xs = np.array([[x1, x2, 0.5 * (x1 + x2)] for _d, x1, _y1, x2, _y2 in boxes])
-        bearings = camera.column_bearings_scan(xs.reshape(-1)).reshape(-1, 3)
-        rows = np.array([[[xc, y2], [xc, min(y2 + bottom_margin_px, H)], [xc, max(y2 - bottom_margin_px, 0.0)]]
-                         for (_d, _x1, _y1, _x2, y2), xc in zip(boxes, xs[:, 2])])
-        ranges = camera.ground_ranges(rows.reshape(-1, 2)).reshape(-1, 3)
-        apex = camera.apex_scan
-        for k, (i, x1, y1, x2, y2) in enumerate(boxes):
-            truncated = {
-                "left": bool(x1 <= edge_margin_px),
-                "right": bool(x2 >= W - edge_margin_px),
-                "top": bool(y1 <= edge_margin_px),
-                "bottom": bool(y2 >= H - edge_margin_px),
-            }
-            b_left, b_right, b_center = (float(b) for b in bearings[k])
-            near, near_lo, near_hi = (float(r) for r in ranges[k])
-            if truncated["bottom"] or not np.isfinite(near_lo):
-                near_lo = 0.0  # the floor contact is not visible: no lower bound
-            near_lo = min(near_lo, max_range_m)
-            r_poly = max(near_lo * (1.0 - near_tolerance), 0.0) if np.isfinite(near_lo) else 0.0
-            r_poly = min(r_poly, 0.95 * max_range_m)
-            poly = _wedge_polygon(apex, b_left, b_right, r_poly, max_range_m)
-            direction = np.array([np.cos(b_center), np.sin(b_center)])
-            out[i] = BoundingArea(
-                detection=dets[i],
-                polygon=poly,
-                apex=apex.copy(),
-                bearing_left=b_left,
-                bearing_right=b_right,
-                bearing_center=b_center,
-                near_range_m=near,
-                near_range_lo=near_lo,
-                near_range_hi=near_hi,
-                far_range_m=float(max_range_m),
-                bisector=np.stack([apex, apex + max_range_m * direction]),
-                truncated=truncated,
-                box_px=np.array([x1, y1, x2, y2], dtype=np.float64),
-            )
+    if not boxes:
+        return out
+    n = len(boxes)
+    xs = np.empty((n, 3))  # left, right, centre column
+    rows = np.empty((n, 3, 2))  # the centre column at the bottom edge, moved down, moved up
+    for k, (_i, x1, _y1, x2, y2) in enumerate(boxes):
+        xc = 0.5 * (x1 + x2)
+        xs[k] = (x1, x2, xc)
+        rows[k] = ((xc, y2), (xc, min(y2 + bottom_margin_px, H)), (xc, max(y2 - bottom_margin_px, 0.0)))
+    bearings = camera.column_bearings_scan(xs.reshape(-1)).reshape(-1, 3).tolist()
+    ranges = camera.ground_ranges(rows.reshape(-1, 2)).reshape(-1, 3).tolist()
+    apex = camera.apex_scan
+    ax, ay = float(apex[0]), float(apex[1])
+    for k, (i, x1, y1, x2, y2) in enumerate(boxes):
+        truncated = {
+            "left": x1 <= edge_margin_px,
+            "right": x2 >= W - edge_margin_px,
+            "top": y1 <= edge_margin_px,
+            "bottom": y2 >= H - edge_margin_px,
+        }
+        b_left, b_right, b_center = bearings[k]
+        near, near_lo, near_hi = ranges[k]
+        if truncated["bottom"] or not math.isfinite(near_lo):
+            near_lo = 0.0  # the floor contact is not visible: no lower bound
+        near_lo = min(near_lo, max_range_m)
+        r_poly = max(near_lo * (1.0 - near_tolerance), 0.0) if math.isfinite(near_lo) else 0.0
+        r_poly = min(r_poly, 0.95 * max_range_m)
+        out[i] = BoundingArea(
+            detection=dets[i],
+            apex=apex.copy(),
+            bearing_left=b_left,
+            bearing_right=b_right,
+            bearing_center=b_center,
+            near_range_m=near,
+            near_range_lo=near_lo,
+            near_range_hi=near_hi,
+            far_range_m=float(max_range_m),
+            bisector=np.array([[ax, ay], [ax + max_range_m * math.cos(b_center), ay + max_range_m * math.sin(b_center)]]),
+            truncated=truncated,
+            box_px=np.array([x1, y1, x2, y2], dtype=np.float64),
+            polygon_near_m=r_poly,
+        )
     return out
 
 
@@ -274,7 +378,9 @@ def assign_points(
 ) -> NDArray[np.bool_]:
     """Which points lie in which areas: ``(N, 2)`` points in ``base_scan`` → ``(N, A)`` bool.
 
-    Containment uses ``shapely.contains_xy`` (vectorised per area). With ``exclusive`` (improved mode)
+    Containment is strict (a point on the outline is outside), as ``shapely.contains_xy`` on the areas'
+    polygons: simple wedges are tested by bearing and range about the apex (:func:`_in_wedges`), the
+    points near their outline and the other areas on the polygon itself. With ``exclusive`` (improved mode)
     a point inside several areas goes to one only: the area whose expected range (its near range
     from the bottom edge, ``[near_lo·(1−tol), near_hi·(1+tol)]``) explains the point best; on a tie
     the area nearest the camera (smallest near range), then the one whose bisector is closest, then
@@ -287,8 +393,33 @@ def assign_points(
     if len(pts) == 0 or A == 0:
         return inside
     finite = np.all(np.isfinite(pts), axis=1)
+    all_finite = bool(finite.all())
+    # simple wedges (all of them, but for degenerate boxes) by bearing and range, a whole apex at once;
+    # points within _WEDGE_EPS of an outline, and other areas, on the polygon
+    by_apex: dict[tuple[float, float], list[int]] = {}
     for k, area in enumerate(areas):
-        inside[:, k] = shapely.contains_xy(area.polygon, pts[:, 0], pts[:, 1]) & finite
+        w = area._wedge_test
+        if w is not None:
+            by_apex.setdefault(w.apex, []).append(k)
+        else:
+            inside[:, k] = shapely.contains_xy(area.polygon, pts[:, 0], pts[:, 1]) & finite
+    fin = pts if all_finite else np.where(finite[:, None], pts, 0.0)
+    for ks in by_apex.values():
+        tests = [areas[k]._wedge_test for k in ks]
+        ins, unsure = _in_wedges(fin, [w for w in tests if w is not None])
+        if not all_finite:
+            ins &= finite[:, None]
+            unsure &= finite[:, None]
+        if unsure.any():
+            for col, k in enumerate(ks):
+                near_outline = np.flatnonzero(unsure[:, col])
+                if len(near_outline):
+                    p = pts[near_outline]
+                    ins[near_outline, col] = shapely.contains_xy(areas[k].polygon, p[:, 0], p[:, 1])
+        if len(ks) == A:
+            inside = ins  # every area (ks: 0, 1, …, A − 1)
+        else:
+            inside[:, ks] = ins
     if not exclusive:
         return inside
     multi = inside.sum(axis=1) > 1
@@ -336,6 +467,8 @@ def contest_by_range(points_scan: FloatArray, areas: Sequence[BoundingArea], mem
     it stays the table's; areas whose bottom edge gives no range keep their points. ``member``:
     ``(N, A)`` as :func:`assign_points` without ``exclusive``; returns a copy."""
     out = np.array(member, dtype=bool, copy=True)
+    if out.ndim != 2 or out.shape[1] < 2:
+        return out  # fewer than two areas: no point is shared
     multi = np.flatnonzero(out.sum(axis=1) > 1)
     if len(multi) == 0:
         return out

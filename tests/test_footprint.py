@@ -60,3 +60,30 @@ def test_contains_point_agrees_with_contains(pts, cx, cy, sx, sy, yaw, margin) -
     fp = Footprint(np.array([cx, cy]), yaw, sx, sy)
     p = np.array(pts, dtype=np.float64)
     assert [fp.contains_point(q, margin) for q in p] == list(fp.contains(p, margin))
+
+
+def test_the_point_shape_cache_follows_every_change_of_the_points() -> None:
+    """estimate_footprint keeps what it derives from the points on the evidence; a new ray reuses it, while
+    new points, points moved in place by a correction and replaced arrays all give a fresh estimate."""
+    from app.ocslam.se2 import Pose2
+
+    def fresh(ev: ObjectEvidence):
+        return estimate_footprint(ObjectEvidence.from_state_dict(ev.state_dict()), prior("sofa"))
+
+    def same(a, b) -> bool:
+        return np.allclose(a.center, b.center, atol=1e-12) and (a.yaw, a.size_x, a.size_y) == (b.yaw, b.size_x, b.size_y)
+
+    ev = ObjectEvidence()
+    ev.add_points(_face(2.0, -0.8, 0.8), kf=1)
+    ev.add_ray(np.array([0.0, 0.0]), np.array([1.0, 0.0]), 1.0, kf=1)
+    a = estimate_footprint(ev, prior("sofa"))
+    cached = ev.shape_cache
+    ev.add_ray(np.array([0.0, 1.0]), np.array([1.0, -0.5]), 1.0, kf=1)  # a ray only: the points' shape is kept
+    b = estimate_footprint(ev, prior("sofa"))
+    assert ev.shape_cache is cached and same(b, fresh(ev))
+    ev.transform({1: Pose2(0.5, 0.2, 0.3)})  # in place: the revision changes
+    c = estimate_footprint(ev, prior("sofa"))
+    assert ev.shape_cache is not cached and same(c, fresh(ev)) and not same(c, a)
+    ev.add_points(_face(2.6, -0.8, 0.8), kf=2)  # new arrays
+    d = estimate_footprint(ev, prior("sofa"))
+    assert same(d, fresh(ev)) and not same(d, c)

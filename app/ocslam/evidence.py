@@ -87,6 +87,10 @@ class ObjectEvidence:
         #: observations with points, and those whose points were all leg-sized islands (legged classes)
         self.observations = 0
         self.leg_obs = 0
+        #: bumped when ``points`` is changed in place (a correction); a new ``points`` array is a change too
+        self.points_revision = 0
+        #: what :func:`app.ocslam.footprint.estimate_footprint` derived from these points (its cache)
+        self.shape_cache: tuple | None = None
 
     # -- accumulation ----------------------------------------------------------------------------
     @property
@@ -208,6 +212,7 @@ class ObjectEvidence:
             m = self.point_kf == k
             if np.any(m):
                 self.points[m] = T.transform_points(self.points[m])
+                self.points_revision += 1
             m = self.ray_kf == k
             if np.any(m):
                 self.ray_origin[m] = T.transform_points(self.ray_origin[m])
@@ -248,6 +253,7 @@ class ObjectEvidence:
             out[:, 0] = cs[j] * p[:, 0] - sn[j] * p[:, 1] + tx[j]
             out[:, 1] = sn[j] * p[:, 0] + cs[j] * p[:, 1] + ty[j]
             self.points[m] = out
+            self.points_revision += 1
         m, j = lookup(self.ray_kf)
         if np.any(m):
             j = j[m]

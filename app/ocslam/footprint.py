@@ -248,6 +248,32 @@ def depth_for_width(width: float, pc: ClassPrior, legs: bool = False) -> tuple[f
 FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
 
 
+def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], float, FloatArray, FloatArray]:
+    """``(points, hits, theta, lo, hi)``: the evidence's points without strays and their rectangle
+    (:func:`min_area_rect`), read-only. Kept on the evidence until its points change (a new ``points``
+    or ``hits`` array, or ``points_revision``): a bisector ray alone, or a correction of other
+    keyframes, leaves them as they were."""
+    c = ev.shape_cache
+    if c is not None and c[0] is ev.points and c[1] is ev.hits and c[2] == ev.points_revision:
+        return c[3], c[4], c[5], c[6], c[7]
+    # stray points that once joined the object (a background point between a pedestal table's legs) do
+    # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
+    # well-seen voxel are ignored
+    strong = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
+    n_strong = int(np.count_nonzero(strong))
+    if n_strong == len(strong) or n_strong == 0:
+        pts, hits = ev.points, ev.hits
+    else:
+        keep = strong.copy()
+        weak = ~strong
+        keep[weak] = _nearest_distance(ev.points[weak], ev.points[strong]) <= _STRAY_M
+        pts, hits = ev.points[keep], ev.hits[keep]
+    th, lo, hi = min_area_rect(pts)
+    # the cache holds the arrays it was computed from, so their identities cannot be reused meanwhile
+    ev.shape_cache = (ev.points, ev.hits, ev.points_revision, pts, hits, th, lo, hi)
+    return pts, hits, th, lo, hi
+
+
 def _extension_free(
     known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
 ) -> bool:
@@ -309,19 +335,7 @@ def estimate_footprint(
             g = g + (n * (w * np.sum(n * ev.ray_origin[use], axis=1))[:, None]).sum(axis=0)
         return Footprint(np.asarray(np.linalg.solve(H, g), dtype=np.float64), yaw, a, b)
 
-    # stray points that once joined the object (a background point between a pedestal table's legs) do
-    # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
-    # well-seen voxel are ignored
-    strong = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
-    n_strong = int(np.count_nonzero(strong))
-    if n_strong == len(strong) or n_strong == 0:
-        pts, hits = ev.points, ev.hits
-    else:
-        keep = strong.copy()
-        weak = ~strong
-        keep[weak] = _nearest_distance(ev.points[weak], ev.points[strong]) <= _STRAY_M
-        pts, hits = ev.points[keep], ev.hits[keep]
-    th, lo, hi = min_area_rect(pts)
+    pts, hits, th, lo, hi = _point_shape(ev)
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
     d_obs = hi - lo
     mid = 0.5 * (lo + hi)

@@ -238,8 +238,8 @@ class ObjectEvidence:
         poses = [deltas[int(k)] for k in ks]
         tx = np.array([T.x for T in poses])
         ty = np.array([T.y for T in poses])
-        cs = np.array([np.cos(T.yaw) for T in poses])
-        sn = np.array([np.sin(T.yaw) for T in poses])
+        cs = np.array([math.cos(T.yaw) for T in poses])  # as Pose2.transform_points
+        sn = np.array([math.sin(T.yaw) for T in poses])
 
         def lookup(kf: NDArray[np.int64]) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
             j = np.clip(np.searchsorted(ks, kf), 0, len(ks) - 1)

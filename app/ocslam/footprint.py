@@ -23,6 +23,8 @@ from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]
+#: ``ndarray.min``/``max`` without their Python wrappers (the same reductions)
+_MIN, _MAX = np.minimum.reduce, np.maximum.reduce
 #: A voxel seen rarely and farther than this from every well-seen voxel is a stray (m).
 _STRAY_M = 0.3
 
@@ -140,16 +142,17 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
         qx, qy = q[:, 0][None, :], q[:, 1][None, :]
         a = qx * cs + qy * sn  # (K, N)
         b = qy * cs - qx * sn
-        a_lo, a_hi = a.min(axis=1, keepdims=True), a.max(axis=1, keepdims=True)
-        b_lo, b_hi = b.min(axis=1, keepdims=True), b.max(axis=1, keepdims=True)
+        a_lo, a_hi = _MIN(a, axis=1, keepdims=True), _MAX(a, axis=1, keepdims=True)
+        b_lo, b_hi = _MIN(b, axis=1, keepdims=True), _MAX(b, axis=1, keepdims=True)
         area = ((a_hi - a_lo) * (b_hi - b_lo))[:, 0]
-        if max(float(qx.max() - qx.min()), float(qy.max() - qy.min())) < 0.5:
+        q0, q1 = q[:, 0], q[:, 1]
+        if max(float(_MAX(q0) - _MIN(q0)), float(_MAX(q1) - _MIN(q1))) < 0.5:
             # a small cluster: the outline says little, the minimum-area rectangle follows its line
             th = float(thetas[int(np.argmin(area))])
         else:
             da = np.minimum(a - a_lo, a_hi - a)
             db = np.minimum(b - b_lo, b_hi - b)
-            score = (1.0 / np.maximum(np.minimum(da, db), 0.01)).sum(axis=1)
+            score = np.add.reduce(1.0 / np.maximum(np.minimum(da, db), 0.01), axis=1)
             best = np.flatnonzero(score >= score.max() * (1.0 - 1e-6))  # ties: the smaller area
             th = float(thetas[best[np.argmin(area[best])]])
     elif n == 2:
@@ -160,7 +163,7 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
     c, s = np.cos(th), np.sin(th)
     a1 = p[:, 0] * c + p[:, 1] * s
     b1 = -p[:, 0] * s + p[:, 1] * c
-    return th, np.array([a1.min(), b1.min()]), np.array([a1.max(), b1.max()])
+    return th, np.array([_MIN(a1), _MIN(b1)]), np.array([_MAX(a1), _MAX(b1)])
 
 
 def _solve2(H: FloatArray, g: FloatArray) -> FloatArray:
@@ -352,7 +355,7 @@ def estimate_footprint(
             one_face = True
         else:
             u = center0[None, :] - views
-            u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
+            u = u / np.maximum(np.sqrt(u[:, 0:1] * u[:, 0:1] + u[:, 1:2] * u[:, 1:2]), 1e-9)  # row norms
             depth_axis = int(np.argmax(np.abs(u @ axes.T).mean(axis=0)))
     tan_axis = 1 - depth_axis if depth_axis >= 0 else -1
 
@@ -442,7 +445,7 @@ def estimate_footprint(
             s_prior[i] = face - sgn * t_nom / 2
 
     # least squares: the centre near every weighted bisector ray, regularised towards the prior
-    H = ray_prior_weight * np.diag(lam)
+    H = np.array([[ray_prior_weight * lam[0], 0.0], [0.0, ray_prior_weight * lam[1]]])  # w · diag(λ)
     g = ray_prior_weight * lam * s_prior
     if any_use:
         d_use = ev.ray_dir[use]

@@ -127,7 +127,7 @@ def test_scheduler():
 
     base = {"suite": "zoo-dev", "params": {"consciousness.presence_threshold": {"range": [0.5, 0.9]}}}
     assert parse_spec(base).scheduler == Scheduler("fifo")
-    assert parse_spec({**base, "scheduler": "asha"}).scheduler == Scheduler("asha", 3, 3.0)
+    assert parse_spec({**base, "scheduler": "asha"}).scheduler == Scheduler("asha", 3, 4.0)
     s = parse_spec({**base, "scheduler": {"asha": {"grace_worlds": 2, "reduction_factor": 4}}}).scheduler
     assert (s.kind, s.grace_worlds, s.reduction_factor) == ("asha", 2, 4.0)
     one = {**base, "only": ["meeting_room"]}

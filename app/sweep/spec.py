@@ -19,7 +19,7 @@
                                         # a trial reports after each world, cheapest worlds first, and stops
                                         # early when its objective so far is not in the best 1/reduction_factor
                                         # of the trials that reached the same world) |
-                                        # {asha: {grace_worlds: 3, reduction_factor: 3}}
+                                        # {asha: {grace_worlds: 3, reduction_factor: 4}}
     trials: 200                         # random/optuna: trials (grid: the grid's size)
     include_defaults: true              # random/optuna: the first trial is the base config's values
     record_floor: 0.2                   # optional: the detector threshold of the recordings (default: the
@@ -104,7 +104,7 @@ class Scheduler:
 
     kind: str = "fifo"
     grace_worlds: int = 3
-    reduction_factor: float = 3.0
+    reduction_factor: float = 4.0
 
     def describe(self) -> str:
         if self.kind == "fifo":
@@ -133,7 +133,7 @@ def parse_scheduler(body: Any, n_worlds: int) -> Scheduler:
     if g >= n_worlds:
         raise SpecError(f"scheduler.asha.grace_worlds: {g} is not below the suite's {n_worlds} world(s): "
                         "no trial could stop early (use fifo)")
-    r = opts.get("reduction_factor", 3)
+    r = opts.get("reduction_factor", 4)  # Tune's default
     if isinstance(r, bool) or not isinstance(r, (int, float)) or not r >= 1.5:
         raise SpecError(f"scheduler.asha.reduction_factor: expected a number ≥ 1.5, got {r!r}")
     return Scheduler("asha", int(g), float(r))

@@ -79,3 +79,26 @@ def test_worker_reports_its_renderer_and_falls_back_when_egl_fails(monkeypatch) 
         worker.close()
     with pytest.raises(sim_world.RendererError):
         CameraWorker(world, Config.load(None, ["sim.renderer=egl"]), seed=0)
+
+
+def test_a_render_process_that_dies_is_replaced_and_the_frame_still_arrives() -> None:
+    """A native crash in the renderer (seen once: glibc's "free(): corrupted unsorted chunks" in the EGL
+    render process during a browser test) kills the process: the next collect, or the next request,
+    starts a new one and asks again, so the loop loses no frame and never stops."""
+    cfg = Config.load(None, ["camera.noise_std=0"])
+    world = load_world(resolve_path(cfg.sim.world))
+    worker = CameraWorker(world, cfg, seed=0)
+    try:
+        worker.request(1.0, world.start, width=96, height=72)
+        worker._proc.kill()  # dies with a request pending
+        worker._proc.join(timeout=10)
+        frame = worker.collect()
+        assert frame.stamp == pytest.approx(1.0) and frame.image.data.shape == (72, 96, 3)
+        assert worker.restarts == 1 and worker.pending == 0
+        worker._proc.kill()  # dies while idle: the next request starts a new one
+        worker._proc.join(timeout=10)
+        worker.request(2.0, world.start, width=96, height=72)
+        assert worker.collect().stamp == pytest.approx(2.0)
+        assert worker.restarts == 2
+    finally:
+        worker.close()

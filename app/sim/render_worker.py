@@ -119,9 +119,10 @@ class CameraWorker:
             self.renderer = str(payload.get("renderer", "tiny"))
             self.renderer_note = str(payload.get("renderer_note", ""))
 
-    def _restart(self) -> None:
-        """Kill a stuck render process, start a new one and re-send what was pending (the first nudged)."""
-        log.warning("camera render process stuck on %s: restarting it", self._pending[0] if self._pending else None)
+    def _restart(self, why: str = "stuck") -> None:
+        """Kill a stuck (or dead) render process, start a new one and re-send what was pending (the first
+        nudged)."""
+        log.warning("camera render process %s on %s: restarting it", why, self._pending[0] if self._pending else None)
         self._proc.kill()
         self._proc.join(timeout=5)
         self._conn.close()
@@ -146,25 +147,37 @@ class CameraWorker:
     def request(self, stamp: float, T_world_base: Pose2, *, width: int, height: int, segmentation: bool = False) -> None:
         req = _Request(float(stamp), (T_world_base.x, T_world_base.y, T_world_base.yaw), int(width), int(height),
                        bool(segmentation))
-        self._conn.send(req)
         self._pending.append(req)
+        try:
+            self._conn.send(req)
+        except OSError:  # the process died (a native crash in the renderer): a new one gets every pending request
+            self._restart(f"died (exit code {self._proc.exitcode})")
 
     def collect(self, timeout_s: float | None = None):
-        """The oldest requested frame (blocks until it is rendered; a stuck render is retried once)."""
+        """The oldest requested frame (blocks until it is rendered). A render process that is stuck, or that
+        died (a native crash in the renderer), is replaced and the frame asked again, once; twice in a row,
+        the frame is dropped with a :class:`CameraWorkerError` (the process is replaced again for the next)."""
         if not self._pending:
             raise CameraWorkerError("collect() without a pending request")
         timeout_s = self.frame_timeout_s if timeout_s is None else timeout_s
-        if not self._conn.poll(timeout_s):
-            self._restart()
-            if not self._conn.poll(timeout_s):
-                stuck = self._pending.popleft()
-                self._restart()
-                raise CameraWorkerError(f"no frame from the render process within {timeout_s:.0f} s ({stuck})")
-        kind, payload = self._conn.recv()
-        self._pending.popleft()
-        if kind != "frame":
-            raise CameraWorkerError(f"render failed:\n{payload}")
-        return payload
+        for attempt in range(2):
+            if self._conn.poll(timeout_s):
+                try:
+                    kind, payload = self._conn.recv()
+                except (EOFError, OSError):
+                    why = f"died (exit code {self._proc.exitcode})"
+                else:
+                    self._pending.popleft()
+                    if kind != "frame":
+                        raise CameraWorkerError(f"render failed:\n{payload}")
+                    return payload
+            else:
+                why = f"stuck for {timeout_s:.0f} s"
+            if attempt == 0:
+                self._restart(why)
+        lost = self._pending.popleft()
+        self._restart(why)
+        raise CameraWorkerError(f"no frame from the render process ({why}, twice): {lost}")
 
     def close(self) -> None:
         try:

@@ -31,6 +31,12 @@ class StageTimer:
             prev = self.recent_ms.get(stage, 0.0)
             self.recent_ms[stage] = 0.9 * prev + 0.1 * seconds * 1e3 if prev else seconds * 1e3
 
+    def charge(self, stage: str, seconds: float) -> None:
+        """Add ``seconds`` of work done for ``stage`` inside another stage's call (no call of its own: the
+        SLAM's map update that the fusion's free-space test triggers), to its total."""
+        with self._lock:
+            self.total_s[stage] = self.total_s.get(stage, 0.0) + seconds
+
     def time(self, stage: str):
         timer = self
 

@@ -234,17 +234,10 @@ class CameraModel:
 
         ``inf`` for rays at or above the horizon.
         """
-        d = self.pixel_rays(uv)
-        c = self.center_base
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (0.0 - c[2]) / d[:, 2]
-        ok = np.isfinite(s) & (s > 0.0)
-        s[~ok] = np.nan
-        # rays_to_plane's x and y, less the apex: the norm as np.linalg.norm sums it (x² + y²)
+        p, ok = self.rays_to_plane(uv, 0.0)
         ax, ay = self.apex_base.tolist()
-        x = c[0] + s * d[:, 0] - ax
-        y = c[1] + s * d[:, 1] - ay
-        r = np.sqrt(x * x + y * y)
+        x, y = p[:, 0] - ax, p[:, 1] - ay
+        r = np.sqrt(x * x + y * y)  # the norm as np.linalg.norm sums it (x² + y²)
         r[~ok] = np.inf
         return r
 

@@ -192,14 +192,13 @@ def resolve_track_collisions(
     # their reach are skipped (a footprint re-estimated since then is tested one by one)
     fps = [t.footprint for t in order]
     centers = np.array([fp.center if fp is not None else (np.nan, np.nan) for fp in fps], dtype=np.float64).reshape(-1, 2)
-    radii = np.hypot([fp.size_x if fp is not None else np.nan for fp in fps],
-                     [fp.size_y if fp is not None else np.nan for fp in fps])
+    radii = np.array([fp.circumradius if fp is not None else np.nan for fp in fps])
     for a in touched:
         if a.id in removed or a.footprint is None:
             continue
         fa0 = a.footprint
         gaps = np.hypot(centers[:, 0] - fa0.center[0], centers[:, 1] - fa0.center[1])
-        far_apart = (gaps > 0.5 * (float(np.hypot(fa0.size_x, fa0.size_y)) + radii) + thr + 1e-6).tolist()
+        far_apart = (gaps > fa0.circumradius + radii + thr + 1e-6).tolist()
         for k, b in enumerate(order):
             fa, fb = a.footprint, b.footprint  # a's may be re-estimated by a merge, never unset
             if far_apart[k] and fa is fa0 and fb is fps[k]:

@@ -55,6 +55,11 @@ class Footprint:
     def area(self) -> float:
         return float(self.size_x * self.size_y)
 
+    @property
+    def circumradius(self) -> float:
+        """Half the diagonal (m): no point of the rectangle is farther from its centre."""
+        return 0.5 * math.hypot(self.size_x, self.size_y)
+
     def contains(self, points: FloatArray, margin: float = 0.0) -> NDArray[np.bool_]:
         """``(N, 2)`` points → inside the rectangle grown by ``margin`` on every side."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2) - self.center[None, :]
@@ -98,7 +103,7 @@ def linspace(start: float, stop: float, num: int) -> FloatArray:
     return y
 
 
-def _nearest_distance(a: FloatArray, b: FloatArray) -> FloatArray:
+def nearest_distances(a: FloatArray, b: FloatArray) -> FloatArray:
     """``(N,)`` distance from each of ``(N, 2)`` points to the nearest of ``(M, 2)`` points (M ≥ 1):
     all pairs for small sets, a KD-tree for large ones."""
     if len(a) * len(b) <= 4096:
@@ -269,7 +274,7 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
     else:
         keep = strong.copy()
         weak = ~strong
-        keep[weak] = _nearest_distance(ev.points[weak], ev.points[strong]) <= _STRAY_M
+        keep[weak] = nearest_distances(ev.points[weak], ev.points[strong]) <= _STRAY_M
         pts, hits = ev.points[keep], ev.hits[keep]
     th, lo, hi = min_area_rect(pts)
     # the cache holds the arrays it was computed from, so their identities cannot be reused meanwhile

@@ -56,12 +56,11 @@ def decay_tracks(
         if boxed:
             b, _r = cam.bearing_ranges_scan(T_scan_map.transform_points(centers[boxed]))
             held = np.zeros(len(b), dtype=bool)
-            for label in labels:
-                rows = [r for r, k in enumerate(boxed) if cand[k].label == label]
-                if rows:
-                    for a in areas:
-                        if a.label == label:
-                            held[rows] |= a.contains_bearing(b[rows], margin=0.05)
+            boxed_labels = np.array([cand[k].label for k in boxed], dtype=object)
+            for a in areas:
+                rows = boxed_labels == a.label
+                if rows.any():
+                    held[rows] |= a.contains_bearing(b[rows], margin=0.05)
             explained = {boxed[r] for r in np.flatnonzero(held).tolist()}
         missed = {id(cand[k]) for k in view if k not in explained}
     if not missed:

@@ -78,13 +78,13 @@ class Pose2:
         return Pose2(
             float(self.x) + c * ox - s * oy,
             float(self.y) + s * ox + c * oy,
-            (yaw + float(other.yaw) + math.pi) % (2.0 * math.pi) - math.pi,
+            float(wrap_angle(yaw + float(other.yaw))),
         )
 
     def inverse(self) -> Pose2:
         yaw, x, y = float(self.yaw), float(self.x), float(self.y)
         c, s = math.cos(yaw), math.sin(yaw)
-        return Pose2(-c * x - s * y, s * x - c * y, (-yaw + math.pi) % (2.0 * math.pi) - math.pi)
+        return Pose2(-c * x - s * y, s * x - c * y, float(wrap_angle(-yaw)))
 
     def between(self, other: Pose2) -> Pose2:
         """The relative motion ``self⁻¹ ∘ other`` (``other`` expressed in ``self``)."""

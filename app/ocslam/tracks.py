@@ -19,13 +19,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from app.ocslam.candidate import Candidate
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import NO_KEYFRAME, ObjectEvidence
-from app.ocslam.footprint import Footprint, estimate_footprint, min_area_rect
+from app.ocslam.footprint import Footprint, estimate_footprint, min_area_rect, nearest_distances
 from app.ocslam.messages import OccupancyGrid, TrackedObject
 from app.ocslam.presence import initial_presence, update_presence
 from app.ocslam.se2 import Pose2
@@ -128,8 +127,7 @@ def angle_wrap(a):
 def overlap_fraction(a: Footprint, b: Footprint) -> float:
     """Intersection area over the smaller footprint's area."""
     # rectangles whose circumcircles are apart do not overlap (most pairs of a map): no polygons
-    reach = 0.5 * (math.hypot(a.size_x, a.size_y) + math.hypot(b.size_x, b.size_y))
-    if math.hypot(float(a.center[0] - b.center[0]), float(a.center[1] - b.center[1])) > reach + 1e-9:
+    if math.hypot(float(a.center[0] - b.center[0]), float(a.center[1] - b.center[1])) > a.circumradius + b.circumradius + 1e-9:
         return 0.0
     pa, pb = a.polygon, b.polygon
     inter = shapely.area(shapely.intersection(pa, pb))
@@ -141,11 +139,7 @@ def min_distance(a: FloatArray, b: FloatArray) -> float:
     """Smallest distance between two ``(N, 2)`` / ``(M, 2)`` point sets (inf if either is empty)."""
     if len(a) == 0 or len(b) == 0:
         return math.inf
-    if len(a) * len(b) <= 4096:  # all pairs: cheaper than a KD-tree for small sets
-        dx = a[:, 0][:, None] - b[:, 0][None, :]
-        dy = a[:, 1][:, None] - b[:, 1][None, :]
-        return math.sqrt(float((dx * dx + dy * dy).min()))
-    return float(cKDTree(b).query(a, k=1)[0].min())
+    return float(nearest_distances(a, b).min())
 
 
 def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typical: bool = False) -> bool:

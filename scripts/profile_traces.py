@@ -5,7 +5,8 @@ The sweep's traces (``runs/sweep-cache/*/trace-*.pkl``, made by ``ocslam sweep``
 per-frame cost alone. The fingerprint (a hash of every object's class, pose, size and presence) shows
 whether a change to the code kept the object maps identical.
 
-    python scripts/profile_traces.py                       # every cached trace, default config
+    python scripts/profile_traces.py                       # the cached zoo-dev traces, default config
+    python scripts/profile_traces.py --suite zoo-test      # the held-out half (only report it)
     python scripts/profile_traces.py --profile 30          # + cProfile, top 30 functions by own time
     python scripts/profile_traces.py --set consciousness.island_threshold_m=0.2
 """
@@ -33,17 +34,30 @@ def fingerprint(objs) -> str:
     return h.hexdigest()[:12]
 
 
+def suite_traces(suite: str) -> list[Path]:
+    """The cached traces (``runs/sweep-cache/<world>-<key>/trace-*.pkl``) of a zoo half, or all of them."""
+    files = sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
+    if suite == "all":
+        return files
+    from app.bench.objects import zoo_split
+
+    names = set(zoo_split()[suite.split("-")[1]])
+    return [f for f in files if f.parent.name.rsplit("-", 1)[0] in names]
+
+
 def main() -> int:
     from app.config import Config
     from app.ocslam.evaluation import evaluate_objects
     from app.sweep.trace import FuseInput, replay_trace
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("traces", nargs="*", help="trace pickles (default: runs/sweep-cache/*/trace-*.pkl)")
+    ap.add_argument("traces", nargs="*", help="trace pickles (default: the suite's in runs/sweep-cache)")
+    ap.add_argument("--suite", choices=("zoo-dev", "zoo-test", "all"), default="zoo-dev",
+                    help="which cached traces by default: the zoo's dev half (default), its test half, or all")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="print the top N functions (own time)")
     a = ap.parse_args()
-    files = [Path(p) for p in a.traces] or sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
+    files = [Path(p) for p in a.traces] or suite_traces(a.suite)
     if not files:
         print("no traces: run `ocslam sweep assets/sweeps/six-constants.yaml --trials 1` first", file=sys.stderr)
         return 2

@@ -9,6 +9,7 @@ whether a change to the code kept the object maps identical.
     python scripts/profile_traces.py --suite zoo-test      # the held-out half (only report it)
     python scripts/profile_traces.py --profile 30          # + cProfile, top 30 functions by own time
     python scripts/profile_traces.py --set consciousness.island_threshold_m=0.2
+    python scripts/profile_traces.py --detector oracle --misses   # the oracle recordings, each miss and FP (dev only)
 """
 
 from __future__ import annotations
@@ -34,15 +35,43 @@ def fingerprint(objs) -> str:
     return h.hexdigest()[:12]
 
 
-def suite_traces(suite: str) -> list[Path]:
-    """The cached traces (``runs/sweep-cache/<world>-<key>/trace-*.pkl``) of a zoo half, or all of them."""
+def recording_detector(trace: Path) -> str:
+    """The detector a cached recording was made with (its ``recording.json``), ``"?"`` if unknown."""
+    import json
+
+    try:
+        return str(json.loads((trace.parent / "recording.json").read_text()).get("detector", "?"))
+    except (OSError, ValueError):
+        return "?"
+
+
+def suite_traces(suite: str, detector: str = "yolo") -> list[Path]:
+    """The cached traces (``runs/sweep-cache/<world>-<key>/trace-*.pkl``) of a zoo half, or all of them,
+    recorded with ``detector`` (``any``: every recording)."""
     files = sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
+    if detector != "any":
+        files = [f for f in files if recording_detector(f) == detector]
     if suite == "all":
         return files
     from app.bench.objects import zoo_split
 
     names = set(zoo_split()[suite.split("-")[1]])
     return [f for f in files if f.parent.name.rsplit("-", 1)[0] in names]
+
+
+def print_misses(objs, truth, ev, threshold: float) -> None:
+    """Each false negative (with its map-side cause) and each false positive of one world."""
+    from app.ocslam.evaluation import explain_misses
+
+    explain_misses(ev, truth, objs, None, threshold)
+    for r in ev.rows:
+        if r.get("cause") in (None, "tp"):
+            continue
+        fp = r.get("kind") == "false_positive"
+        xy = r["est_xy"] if fp else r["true_xy"]
+        who = f"#{r.get('object_id')} p={r.get('presence')}" if fp else r.get("name", "")
+        print(f"    {'FP' if fp else 'FN'} {r.get('class', ''):12s} ({xy[0]:6.2f}, {xy[1]:6.2f}) {r.get('cause'):15s} "
+              f"{who} {r.get('miss_detail', '')}")
 
 
 def main() -> int:
@@ -54,15 +83,18 @@ def main() -> int:
     ap.add_argument("traces", nargs="*", help="trace pickles (default: the suite's in runs/sweep-cache)")
     ap.add_argument("--suite", choices=("zoo-dev", "zoo-test", "all"), default="zoo-dev",
                     help="which cached traces by default: the zoo's dev half (default), its test half, or all")
+    ap.add_argument("--detector", choices=("yolo", "oracle", "any"), default="yolo",
+                    help="the recordings' detector (default yolo)")
+    ap.add_argument("--misses", action="store_true", help="list each world's misses and false positives")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="print the top N functions (own time)")
     a = ap.parse_args()
-    files = [Path(p) for p in a.traces] or suite_traces(a.suite)
+    files = [Path(p) for p in a.traces] or suite_traces(a.suite, a.detector)
     if not files:
         print("no traces: run `ocslam sweep assets/sweeps/six-constants.yaml --trials 1` first", file=sys.stderr)
         return 2
     cfg = Config()
-    cfg.set("detector.kind", "yolo")
+    cfg.set("detector.kind", "oracle" if a.detector == "oracle" else "yolo")
     for s in a.set:
         k, _, v = s.partition("=")
         cfg.set(k, v)
@@ -86,6 +118,8 @@ def main() -> int:
         f1s.append(ev.f1)
         print(f"{tr.name:28s} {frames:5d} frames {dt:7.2f} CPU s {1e3 * dt / max(frames, 1):6.2f} ms/frame "
               f"{len(objs):3d} objects {fingerprint(objs)} F1 {ev.f1:.3f}")
+        if a.misses:
+            print_misses(objs, tr.truth, ev, cfg.consciousness.presence_threshold)
     print(f"{'total':28s} {int(total_frames):5d} frames {total_s:7.2f} CPU s {1e3 * total_s / max(total_frames, 1):6.2f} ms/frame "
           f"mean F1 {sum(f1s) / len(f1s):.4f}")
     if prof:

@@ -64,6 +64,12 @@ def area_candidate(
     )
     ray_w = 0.0 if (area.truncated["left"] or area.truncated["right"]) else 1.0
     open_side = int(area.truncated["left"]) - int(area.truncated["right"])
+    closed_edge = None
+    if open_side:
+        # the closed edge's half-line and its outward normal (to the right of the right edge, to the
+        # left of the left edge), in the object frame
+        b = (area.bearing_right if open_side > 0 else area.bearing_left) + T_map_scan.yaw
+        closed_edge = np.array([ray_o, [open_side * math.sin(b), -open_side * math.cos(b)]])
     near = area.near_range_m if np.isfinite(area.near_range_m) else math.inf
 
     islands: list[Island] = []
@@ -218,6 +224,7 @@ def area_candidate(
                 support=support,
                 legs=legs,
                 open_side=open_side,
+                closed_edge=closed_edge,
             ),
             islands,
         )

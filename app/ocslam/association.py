@@ -48,7 +48,10 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
         if not match and (partial or t.partial_only) and len(cand.points):
             # a partial view of a large object: its points continue the object's (one of its
             # typical shapes holds both)
-            match = contiguous(cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True)
+            # ... on the side where the box is cut: nothing of the object lies beyond its closed edge
+            match = cand.beyond_closed_edge(t.evidence.points) <= 0.2 and contiguous(
+                cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True
+            )
             if match:
                 d = thr + float(min_distance(cand.points, t.evidence.points))
         if match and d < best_d:

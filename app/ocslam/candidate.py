@@ -40,8 +40,20 @@ class Candidate:
     support: bool | None = None  # legged classes: one small island on the centre line (a pedestal)
     legs: bool = False  # legged classes: every chosen island is leg-sized
     open_side: int = 0  # +1/-1: the box is cut by the image's left/right border only
+    #: a box cut by one border only: ``(2, 2)`` ``[origin, outward normal]`` (object frame) of its other,
+    #: *closed* edge's half-line: the object does not extend beyond it (:meth:`beyond_closed_edge`)
+    closed_edge: FloatArray | None = None
     track_id: int | None = None
     status: str = "new"  # new | created | updated | collision
+
+    def beyond_closed_edge(self, points: FloatArray, margin_m: float = 0.1) -> float:
+        """The fraction of ``(N, 2)`` points (object frame) in front of the camera and more than
+        ``margin_m`` beyond the box's closed edge (0 for a box that is not cut on one side only)."""
+        if self.closed_edge is None or len(points) == 0:
+            return 0.0
+        o, n = self.closed_edge
+        d = np.asarray(points, dtype=np.float64).reshape(-1, 2) - o
+        return float(np.count_nonzero(d @ n > margin_m)) / len(d)
 
     @property
     def center(self) -> FloatArray:

@@ -107,7 +107,7 @@ def strip_points(t: Track, other: FloatArray, cfg: ConsciousnessConfig, known_fr
     gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
     d, _ = cKDTree(other).query(ev.points, k=1)
     keep = d > gap
-    ev.points, ev.hits, ev.point_kf = ev.points[keep], ev.hits[keep], ev.point_kf[keep]
+    ev.keep_points(keep)
     if not ev.has_points:
         return False
     t.refresh(known_free)

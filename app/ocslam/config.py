@@ -366,6 +366,13 @@ class ConsciousnessConfig:
         "the nearest); objects of different classes collide only over the points they share",
         live=True,
     )
+    outside_ratio: float = param(
+        0.5, min=0.0, max=5.0, step=0.05,
+        help="improved: a point of an object's evidence that the LIDAR sees inside the image but outside the object's "
+        "own box, in at least two views and more often than this ratio of its hits, no longer shapes the object "
+        "(a stool's legs that joined a round table from behind it; 0: off)",
+        live=True,
+    )
     range_contest_slack: float = param(
         0.1, min=0.0, max=2.0, step=0.01,
         help="improved, with point ownership: a point inside several boxes' wedges is lost by a box whose bottom-edge "

@@ -56,6 +56,7 @@ from app.ocslam.footprint import Footprint
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import close_pairs, cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
+from app.ocslam.outside import seen_outside
 from app.ocslam.projection import assign_points, bounding_areas, camera_bound, contest_by_range
 from app.ocslam.se2 import Pose2
 from app.ocslam.seed import SeedConsciousness
@@ -437,6 +438,22 @@ class Consciousness:
             t.near_range = cand.near_range
             if t not in touched:
                 touched.append(t)
+        # negative evidence: points of each object seen now outside the box that saw it (a neighbour's)
+        ratio = float(cfg.outside_ratio)
+        for cand in candidates:
+            if cand is None or cand.track_id is None or cand.status == "collision":
+                continue
+            t = next((tr for tr in touched if tr.id == cand.track_id), None)
+            if t is None:
+                continue
+            ev = t.evidence
+            changed = ev.outside_ratio != ratio
+            ev.outside_ratio = ratio
+            if ratio > 0.0 and ev.has_points:
+                changed |= ev.mark_outside(seen_outside(ev.points, ev.hits, T_map_scan, areas[cand.area_index], cam, ranges,
+                                                        float(scan.angle_min), float(scan.angle_increment), max_r))
+            if changed:
+                t.refresh(self._known_free)
         # boxes that gave no object still see objects: a tracked object of the class in their wedge, at a
         # range their bottom edge allows, is seen again (beyond the LIDAR's range, points rejected...)
         for k, area in enumerate(areas):

@@ -73,6 +73,11 @@ class ObjectEvidence:
         self.points = np.zeros((0, 2))
         self.hits = np.zeros(0, dtype=np.int64)
         self.point_kf = np.zeros(0, dtype=np.int64)
+        #: per voxel: frames in which the LIDAR saw it inside the image but outside the object's own box
+        #: (:mod:`app.ocslam.outside`); ``outside_ratio`` (``consciousness.outside_ratio``, 0: off) decides
+        #: which voxels still shape the object (:meth:`trusted`)
+        self.outside = np.zeros(0, dtype=np.int64)
+        self.outside_ratio = 0.0
         self.ray_origin = np.zeros((0, 2))
         self.ray_dir = np.zeros((0, 2))
         self.ray_weight = np.zeros(0)
@@ -97,13 +102,16 @@ class ObjectEvidence:
     def has_points(self) -> bool:
         return len(self.points) > 0
 
-    def add_points(self, points: FloatArray, kf: int = NO_KEYFRAME) -> None:
-        """Add ``(N, 2)`` points (object frame), merging them into voxels of ``voxel_m``."""
+    def add_points(self, points: FloatArray, kf: int = NO_KEYFRAME, outside: NDArray[np.int64] | None = None) -> None:
+        """Add ``(N, 2)`` points (object frame), merging them into voxels of ``voxel_m``; ``outside``
+        ``(N,)`` their counts of views outside the object's box (:meth:`absorb`; default none)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         fin = np.isfinite(p)
         ok = fin[:, 0] & fin[:, 1]
+        out_new = np.zeros(len(p), dtype=np.int64) if outside is None else np.asarray(outside, dtype=np.int64).reshape(-1)
         if not ok.all():
             p = p[ok]
+            out_new = out_new[ok]
         if len(p) == 0:
             return
         # existing voxel means carry their hit counts as weights
@@ -118,6 +126,11 @@ class ObjectEvidence:
         sy = np.bincount(inv, weights=pos[:, 1] * w, minlength=n)
         kf_out = np.full(n, NO_KEYFRAME, dtype=np.int64)
         np.maximum.at(kf_out, inv, kfs)
+        if self.outside.any() or out_new.any():
+            out_all = np.concatenate([self.outside, out_new]).astype(np.float64)
+            self.outside = np.rint(np.bincount(inv, weights=out_all, minlength=n)).astype(np.int64)
+        else:
+            self.outside = np.zeros(n, dtype=np.int64)
         self.points = np.empty((n, 2))
         np.divide(sx, wsum, out=self.points[:, 0])
         np.divide(sy, wsum, out=self.points[:, 1])
@@ -127,6 +140,31 @@ class ObjectEvidence:
             keep = np.argsort(-self.hits, kind="stable")[: self.max_points]
             keep.sort()
             self.points, self.hits, self.point_kf = self.points[keep], self.hits[keep], self.point_kf[keep]
+            self.outside = self.outside[keep]
+
+    def keep_points(self, keep: NDArray[np.bool_]) -> None:
+        """Keep only the voxels where ``keep`` ``(N,)`` is True (with their hits, keyframes and counts)."""
+        self.points, self.hits, self.point_kf = self.points[keep], self.hits[keep], self.point_kf[keep]
+        self.outside = self.outside[keep]
+
+    def mark_outside(self, seen: NDArray[np.bool_]) -> bool:
+        """One more view outside the object's box for each voxel where ``seen`` ``(N,)`` is True; True if
+        there was one."""
+        if not seen.any():
+            return False
+        self.outside[seen] += 1
+        self.points_revision += 1
+        return True
+
+    def trusted(self) -> NDArray[np.bool_] | None:
+        """``(N,)`` the voxels that still shape the object: not seen outside its box in at least two views
+        and more often than ``outside_ratio`` × their hits; ``None`` if that is every voxel."""
+        if self.outside_ratio <= 0.0 or not len(self.outside):
+            return None
+        bad = (self.outside >= 2) & (self.outside > self.outside_ratio * self.hits)
+        if not bad.any() or bad.all():
+            return None
+        return ~bad
 
     def add_ray(
         self,
@@ -185,8 +223,11 @@ class ObjectEvidence:
         if other.has_points:
             for k in np.unique(other.point_kf):
                 m = other.point_kf == k
-                # repeat points by hits to keep their weight
-                self.add_points(np.repeat(other.points[m], other.hits[m], axis=0), int(k))
+                # repeat points by hits to keep their weight; the first copy carries the outside count
+                h = other.hits[m]
+                out = np.zeros(int(h.sum()), dtype=np.int64)
+                out[np.concatenate([[0], np.cumsum(h)[:-1]])] = other.outside[m]
+                self.add_points(np.repeat(other.points[m], h, axis=0), int(k), out)
         for o, d, w, k, a, op in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app, other.ray_open):
             self.add_ray(o, d, float(w), int(k), apparent_width=float(a), open_side=int(op))
         self.support_obs += other.support_obs
@@ -280,6 +321,7 @@ class ObjectEvidence:
             "points": self.points.tolist(),
             "hits": self.hits.tolist(),
             "point_kf": self.point_kf.tolist(),
+            "outside": self.outside.tolist(),
             "ray_origin": self.ray_origin.tolist(),
             "ray_dir": self.ray_dir.tolist(),
             "ray_weight": self.ray_weight.tolist(),
@@ -300,6 +342,7 @@ class ObjectEvidence:
         e.points = np.asarray(d.get("points", []), dtype=np.float64).reshape(-1, 2)
         e.hits = np.asarray(d.get("hits", []), dtype=np.int64).reshape(-1)
         e.point_kf = np.asarray(d.get("point_kf", []), dtype=np.int64).reshape(-1)
+        e.outside = np.asarray(d.get("outside", [0] * len(e.hits)), dtype=np.int64).reshape(-1)
         e.ray_origin = np.asarray(d.get("ray_origin", []), dtype=np.float64).reshape(-1, 2)
         e.ray_dir = np.asarray(d.get("ray_dir", []), dtype=np.float64).reshape(-1, 2)
         e.ray_weight = np.asarray(d.get("ray_weight", []), dtype=np.float64).reshape(-1)
@@ -318,7 +361,7 @@ class ObjectEvidence:
         e.corner_obs = int(d.get("corner_obs", 0))
         e.observations = int(d.get("observations", 0))
         e.leg_obs = int(d.get("leg_obs", 0))
-        if not (len(e.points) == len(e.hits) == len(e.point_kf)) or not (
+        if not (len(e.points) == len(e.hits) == len(e.point_kf) == len(e.outside)) or not (
             len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open)
         ):
             raise ValueError("object evidence: array lengths differ")

@@ -262,23 +262,27 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
     or ``hits`` array, or ``points_revision``): a bisector ray alone, or a correction of other
     keyframes, leaves them as they were."""
     c = ev.shape_cache
-    if c is not None and c[0] is ev.points and c[1] is ev.hits and c[2] == ev.points_revision:
+    if c is not None and c[0] is ev.points and c[1] is ev.hits and c[2] == (ev.points_revision, ev.outside_ratio):
         return c[3], c[4], c[5], c[6], c[7]
+    points, all_hits = ev.points, ev.hits
+    trusted = ev.trusted()  # voxels seen outside the object's own box from other viewpoints do not shape it
+    if trusted is not None:
+        points, all_hits = points[trusted], all_hits[trusted]
     # stray points that once joined the object (a background point between a pedestal table's legs) do
     # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
     # well-seen voxel are ignored
-    strong = ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))
+    strong = all_hits >= max(1.0, 0.1 * float(all_hits.max()))
     n_strong = int(np.count_nonzero(strong))
     if n_strong == len(strong) or n_strong == 0:
-        pts, hits = ev.points, ev.hits
+        pts, hits = points, all_hits
     else:
         keep = strong.copy()
         weak = ~strong
-        keep[weak] = nearest_distances(ev.points[weak], ev.points[strong]) <= _STRAY_M
-        pts, hits = ev.points[keep], ev.hits[keep]
+        keep[weak] = nearest_distances(points[weak], points[strong]) <= _STRAY_M
+        pts, hits = points[keep], all_hits[keep]
     th, lo, hi = min_area_rect(pts)
     # the cache holds the arrays it was computed from, so their identities cannot be reused meanwhile
-    ev.shape_cache = (ev.points, ev.hits, ev.points_revision, pts, hits, th, lo, hi)
+    ev.shape_cache = (ev.points, ev.hits, (ev.points_revision, ev.outside_ratio), pts, hits, th, lo, hi)
     return pts, hits, th, lo, hi
 
 

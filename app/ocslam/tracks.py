@@ -270,7 +270,9 @@ def update_track(
     pc = t.prior
     consistent = True
     if len(cand.points) and t.evidence.has_points:
-        _th, lo, hi = min_area_rect(np.vstack([t.evidence.points, cand.points]))
+        trusted = t.evidence.trusted()  # the voxels seen outside its box elsewhere are not its shape
+        own = t.evidence.points if trusted is None else t.evidence.points[trusted]
+        _th, lo, hi = min_area_rect(np.vstack([own, cand.points]))
         d = hi - lo
         ok = pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25)
         if ok and cfg.point_ownership and pc.legged and cand.legs and t.evidence.leg_obs * 2 > t.evidence.observations:

@@ -68,8 +68,8 @@ def area_candidate(
     if open_side:
         # the closed edge's half-line and its outward normal (to the right of the right edge, to the
         # left of the left edge), in the object frame
-        b = (area.bearing_right if open_side > 0 else area.bearing_left) + T_map_scan.yaw
-        closed_edge = np.array([ray_o, [open_side * math.sin(b), -open_side * math.cos(b)]])
+        b_closed = (area.bearing_right if open_side > 0 else area.bearing_left) + T_map_scan.yaw
+        closed_edge = np.array([ray_o, [open_side * math.sin(b_closed), -open_side * math.cos(b_closed)]])
     near = area.near_range_m if np.isfinite(area.near_range_m) else math.inf
 
     islands: list[Island] = []

@@ -61,7 +61,7 @@ def lidar_sees(
 
 def seen_outside(
     points_map: FloatArray,
-    weights: FloatArray,
+    weights: NDArray[np.float64] | NDArray[np.int64],
     T_map_scan: Pose2,
     area: BoundingArea,
     camera: CameraModel,

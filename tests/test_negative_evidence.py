@@ -87,7 +87,9 @@ def test_outside_counts_follow_their_voxels():
     far = np.argmax(ev.points[:, 0])
     seen = np.zeros(2, dtype=bool)
     seen[far] = True
-    assert ev.mark_outside(seen) and ev.mark_outside(seen)
+    ev.outside_ratio = 0.5
+    assert not ev.mark_outside(seen)  # one view is not enough: the shape is unchanged
+    assert ev.mark_outside(seen)  # two views, more than half the voxel's one hit: it no longer shapes the object
     assert not ev.mark_outside(np.zeros(2, dtype=bool))
     ev.add_points(np.array([[1.001, 0.001], [0.5, 0.5]]), kf=2)  # one more hit on the far voxel, a new voxel
     i = int(np.argmin(np.hypot(ev.points[:, 0] - 1.0, ev.points[:, 1])))

@@ -149,11 +149,15 @@ class ObjectEvidence:
 
     def mark_outside(self, seen: NDArray[np.bool_]) -> bool:
         """One more view outside the object's box for each voxel where ``seen`` ``(N,)`` is True; True if
-        there was one."""
+        that changed which voxels shape the object (:meth:`trusted`, at ``outside_ratio``)."""
         if not seen.any():
             return False
+        before = self.trusted()
         self.outside[seen] += 1
-        self.points_revision += 1
+        after = self.trusted()
+        if (before is None and after is None) or (before is not None and after is not None and np.array_equal(before, after)):
+            return False
+        self.points_revision += 1  # the shape's cache (footprint._point_shape) is stale
         return True
 
     def trusted(self) -> NDArray[np.bool_] | None:

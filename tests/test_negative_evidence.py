@@ -201,3 +201,55 @@ def test_a_partial_view_does_not_continue_an_object_beyond_its_boxs_closed_edge(
     cand.closed_edge = np.array([robot, [-math.sin(b_left), math.cos(b_left)]])
     assert cand.beyond_closed_edge(arm) == 1.0 and cand.beyond_closed_edge(desk) == 0.0
     assert associate(cand, [track], 1.0, cfg) is None
+
+
+def _legs(cx: float, cy: float, half: float = 0.19) -> np.ndarray:
+    """Points of four chair legs (3 cm squares of 4 points) at the corners of a square around (cx, cy)."""
+    out = []
+    for dx in (-half, half):
+        for dy in (-half, half):
+            for ex in (-0.01, 0.01):
+                for ey in (-0.01, 0.01):
+                    out.append((cx + dx + ex, cy + dy + ey))
+    return np.array(out)
+
+
+def _legs_track(track_id: int, points: np.ndarray, box: int):
+    c = Candidate(box, "chair", 0.9, "lidar_legs", points, None, 2.0, ray_origin=np.array([0.0, -2.0]),
+                  ray_dir=np.array([0.0, 1.0]), ray_weight=1.0, legs=True)
+    t = create_track(track_id, c, 0.0, -1, ConsciousnessConfig(), None)
+    t.saw(1.0, box)  # both seen in the frame at 1.0 s, through different boxes
+    return t
+
+
+def _collide(tracks):
+    from shapely.geometry import Polygon
+
+    from app.ocslam.candidate import FrameReport
+    from app.ocslam.collisions import resolve_track_collisions
+
+    rep = FrameReport(1.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon())
+    return resolve_track_collisions(list(tracks), list(tracks), 1.0, ConsciousnessConfig(), None, rep)
+
+
+def test_two_boxes_on_the_same_points_are_one_object():
+    """Co-observed (two boxes of one frame) normally means two instances, however close; but two objects
+    resting on the same LIDAR points are one: one box's island was the other's object."""
+    a = _legs_track(0, _legs(2.0, 0.0), 0)
+    b = _legs_track(1, _legs(2.0, 0.0)[:8], 1)  # two of a's legs
+    kept = _collide([a, b])
+    assert len(kept) == 1 and len(kept[0].evidence.points) == len(a.evidence.points)
+    # side by side on their own points: two chairs
+    a, c = _legs_track(0, _legs(2.0, 0.0), 0), _legs_track(2, _legs(2.5, 0.0), 1)
+    assert len(_collide([a, c])) == 2
+
+
+def test_a_track_grown_over_a_neighbour_gives_the_neighbour_its_points_back():
+    """A 'chair' whose evidence holds two chairs' legs (1.2 m apart: no one chair's legs) and a chair on
+    the second set of legs, seen in one frame: the larger loses the shared points, both stay."""
+    both = _legs_track(0, np.vstack([_legs(1.0, 0.0), _legs(2.2, 0.0)]), 0)
+    second = _legs_track(1, _legs(2.2, 0.0), 1)
+    kept = _collide([both, second])
+    assert len(kept) == 2
+    xs = {t.id: t.evidence.points[:, 0] for t in kept}
+    assert xs[0].max() < 1.5 and xs[1].min() > 1.9

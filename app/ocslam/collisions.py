@@ -212,7 +212,30 @@ def resolve_track_collisions(
             # the footprints' overlap_fraction is computed only on the branches that use it
             if a.label == b.label:
                 if co_observed(a, b):
-                    continue  # seen side by side through two boxes in one frame: two objects, however close
+                    # seen side by side through two boxes in one frame: two objects, however close,
+                    # unless they rest on the same LIDAR points (one box's island was the other's object)
+                    if not (cfg.point_ownership and a.evidence.has_points and b.evidence.has_points):
+                        continue
+                    sa, sb = shared_fractions(strong_points(a), strong_points(b), cfg)
+                    if max(sa, sb) < float(cfg.shared_evidence_fraction):
+                        continue
+                    if not one_instance(a, b):
+                        # together larger than one instance: the larger loses the shared points (as a
+                        # nested object's, below) and stays if it keeps points of its own
+                        loser, other = (a, b) if fa.area >= fb.area else (b, a)
+                        if not strip_points(loser, strong_points(other), cfg, known_free):
+                            removed.add(loser.id)
+                            rep.removed += 1
+                            if loser is a:
+                                break
+                        continue
+                    keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
+                    merge_tracks(keep, drop, cfg, known_free)
+                    removed.add(drop.id)
+                    rep.merged += 1
+                    if drop is a:
+                        break
+                    continue
                 same = d < thr or overlap_fraction(fa, fb) >= ov
                 if same and cfg.point_ownership and not one_instance(a, b):
                     same = False  # overlapping, but together larger than any instance: two objects

@@ -49,7 +49,8 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
             # a partial view of a large object: its points continue the object's (one of its
             # typical shapes holds both)
             # ... on the side where the box is cut: nothing of the object lies beyond its closed edge
-            match = cand.beyond_closed_edge(t.evidence.points) <= 0.2 and contiguous(
+            closed_ok = not cfg.point_ownership or cand.beyond_closed_edge(t.evidence.points) <= 0.2
+            match = closed_ok and contiguous(
                 cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True
             )
             if match:

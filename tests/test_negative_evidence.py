@@ -214,11 +214,11 @@ def _legs(cx: float, cy: float, half: float = 0.19) -> np.ndarray:
     return np.array(out)
 
 
-def _legs_track(track_id: int, points: np.ndarray, box: int):
-    c = Candidate(box, "chair", 0.9, "lidar_legs", points, None, 2.0, ray_origin=np.array([0.0, -2.0]),
+def _legs_track(track_id: int, points: np.ndarray, box: int, label: str = "chair", stamp: float = 1.0):
+    c = Candidate(box, label, 0.9, "lidar_legs", points, None, 2.0, ray_origin=np.array([0.0, -2.0]),
                   ray_dir=np.array([0.0, 1.0]), ray_weight=1.0, legs=True)
     t = create_track(track_id, c, 0.0, -1, ConsciousnessConfig(), None)
-    t.saw(1.0, box)  # both seen in the frame at 1.0 s, through different boxes
+    t.saw(stamp, box)  # seen in the frame at ``stamp`` through box ``box``
     return t
 
 
@@ -253,3 +253,20 @@ def test_a_track_grown_over_a_neighbour_gives_the_neighbour_its_points_back():
     assert len(kept) == 2
     xs = {t.id: t.evidence.points[:, 0] for t in kept}
     assert xs[0].max() < 1.5 and xs[1].min() > 1.9
+
+
+def test_two_objects_standing_on_each_others_centre_are_one():
+    """Two dog tracks whose points together exceed any dog (one holds a strip of the wall behind it), each
+    centre inside the other's footprint: two solid objects cannot interpenetrate, so they are one. Side
+    by side (neither centre inside the other) they stay two."""
+    body = np.array([[x, y] for x in np.linspace(2.6, 3.4, 9) for y in (2.37, 2.45)])
+    wall = np.array([[x, 2.86] for x in np.linspace(2.6, 3.0, 5)])
+    a = _legs_track(0, np.vstack([body[:10], wall]), 0, "dog", stamp=1.0)
+    b = _legs_track(1, np.vstack([body[4:], wall[2:]]), 0, "dog", stamp=2.0)
+    assert a.footprint.contains_point(b.footprint.center) and b.footprint.contains_point(a.footprint.center)
+    from app.ocslam.collisions import one_instance
+
+    assert not one_instance(a, b)  # the union is no dog: the former rule kept both
+    assert len(_collide([a, b])) == 1
+    c = _legs_track(2, body + np.array([1.2, 0.0]), 0, "dog", stamp=2.0)
+    assert len(_collide([_legs_track(0, body, 0, "dog"), c])) == 2

@@ -238,7 +238,10 @@ def resolve_track_collisions(
                     continue
                 same = d < thr or overlap_fraction(fa, fb) >= ov
                 if same and cfg.point_ownership and not one_instance(a, b):
-                    same = False  # overlapping, but together larger than any instance: two objects
+                    # overlapping, but together larger than any instance: two objects, unless each stands
+                    # on the other's centre (two solid objects cannot interpenetrate: one of them holds
+                    # foreign points)
+                    same = fa.contains_point(fb.center) and fb.contains_point(fa.center)
                 if not same:
                     # pieces of one object seen from different sides or only in parts (cut by the
                     # image border): close (touching; within the class's length for partial views)

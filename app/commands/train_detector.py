@@ -16,6 +16,12 @@ schedule, epoch counter) is copied to --checkpoint (default assets/models/detect
 continues that same run; --hours stops it cleanly at the end of an epoch (the schedule is the run's,
 not refitted to the budget).
 
+A committed float ONNX model (whose PyTorch checkpoint was not kept) can be trained further: its weights
+are converted into an ultralytics checkpoint under the run folder (app.training.onnx_init; same outputs)
+and used as --init-weights:
+
+    ocslam train-detector --data datasets/sim --init-onnx assets/models/detector-v3.onnx --name v4-from-v3
+
 The app's inference model is made from a trained float model (static input, int8; needs onnx,
 onnxslim and onnxruntime, no torch):
 
@@ -27,6 +33,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from app.training.train import TrainOptions
 
 #: The dataset recipe of the committed model (app.training.dataset.DatasetOptions defaults).
 DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out {out}"
@@ -46,6 +56,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", default="yolov8n.yaml", help="ultralytics model yaml (no pretrained weights): yolov8n.yaml, yolo11n.yaml")
     p.add_argument("--init-weights", type=Path, default=None,
                    help="start from an earlier checkpoint of ours (e.g. runs/detector/v1/weights/best.pt); never a download")
+    p.add_argument("--init-onnx", type=Path, default=None, metavar="FLOAT_ONNX",
+                   help="start from the weights of a float ONNX model exported by this command (e.g. "
+                        "assets/models/detector-v3.onnx): converted to <runs>/<name>/init-<stem>.pt first")
+    p.add_argument("--init-onnx-calib", type=int, default=128, metavar="N",
+                   help="with --init-onnx: BatchNorm statistics from N training images (0: identity BatchNorms)")
     p.add_argument("--imgsz", type=int, default=224, help="training image size (paper: 224)")
     p.add_argument("--epochs", type=int, default=None,
                    help="epochs of the run's schedule (default 60; with --resume: the saved run's, or this to extend it)")
@@ -87,6 +102,15 @@ def run(args: argparse.Namespace) -> int:
 
     if args.optimize is not None:
         return _optimize(args)
+    if args.init_onnx is not None:
+        clash = "--init-weights" if args.init_weights is not None else "--resume" if args.resume else None
+        if clash:
+            print(f"ocslam: error: --init-onnx and {clash} exclude each other (both say where the weights come from)",
+                  file=sys.stderr)
+            return 2
+        if not args.init_onnx.is_file():
+            print(f"ocslam: error: --init-onnx: no ONNX model at {args.init_onnx}", file=sys.stderr)
+            return 2
     opts = TrainOptions(
         data=args.data,
         model=args.model,
@@ -123,6 +147,10 @@ def run(args: argparse.Namespace) -> int:
         recipe.command = DEFAULT_DATASET_COMMAND.format(out=args.data)
         print(f"no dataset at {args.data}: rendering one first ({recipe.command})")
         build_dataset(recipe)
+    if args.init_onnx is not None:
+        rc = _init_from_onnx(args, opts)
+        if rc:
+            return rc
     try:
         res = train_detector(opts)
     except TrainingUnavailable as e:
@@ -151,6 +179,52 @@ def run(args: argparse.Namespace) -> int:
     args.optimize = res.model_path
     args.out = args.app_model
     return _optimize(args)
+
+
+def _calibration_images(data: Path, n: int) -> list[Path]:
+    """Up to ``n`` training images of the dataset at ``data`` (folder or data.yaml, ``train`` a folder or
+    a list of folders), evenly spread over the sorted file names."""
+    import yaml
+
+    y = data / "data.yaml" if data.is_dir() else data
+    if n <= 0 or not y.is_file():
+        return []
+    d = yaml.safe_load(y.read_text()) or {}
+    base = Path(d["path"]) if d.get("path") else y.parent
+    if not base.is_absolute() and not base.is_dir():  # ultralytics also takes it relative to the yaml's folder
+        base = y.parent / base
+    train = d.get("train") or []
+    folders = [base / t for t in ([train] if isinstance(train, str) else train)]
+    files = sorted(p for f in folders if f.is_dir() for p in f.iterdir()
+                   if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp"))
+    if len(files) <= n:
+        return files
+    step = len(files) / n
+    return [files[int(i * step)] for i in range(n)]
+
+
+def _init_from_onnx(args: argparse.Namespace, opts: TrainOptions) -> int:
+    """Convert ``--init-onnx`` into an ultralytics checkpoint under the run folder and make it the
+    run's init weights. Returns an exit status (0: go on)."""
+    import sys
+
+    from app.training.onnx_init import OnnxInitError, onnx_to_checkpoint
+    from app.training.train import TrainingUnavailable
+
+    out_pt = Path(opts.runs_dir) / opts.name / f"init-{args.init_onnx.stem}.pt"
+    calib = _calibration_images(args.data, args.init_onnx_calib)
+    try:
+        res = onnx_to_checkpoint(args.init_onnx, out_pt, model_yaml=args.model, imgsz=args.imgsz, calib_images=calib)
+    except TrainingUnavailable as e:
+        print(f"ocslam train-detector: {e}", file=sys.stderr)
+        return 2
+    except (FileNotFoundError, OnnxInitError) as e:
+        print(f"ocslam: error: --init-onnx: {e}", file=sys.stderr)
+        return 2
+    bn = f"BatchNorm statistics from {len(calib)} training images" if res.bn_calibrated else "identity BatchNorms"
+    print(f"--init-onnx: {args.init_onnx} → {out_pt} ({res.convs_loaded} convolutions, {bn})")
+    opts.init_weights = out_pt
+    return 0
 
 
 def _optimize(args: argparse.Namespace) -> int:

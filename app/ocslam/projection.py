@@ -365,9 +365,17 @@ def camera_bound(camera: CameraModel, max_range_m: float) -> Polygon:
 
 
 def camera_bound_bearings(camera: CameraModel) -> tuple[float, float]:
-    """``(bearing_right, bearing_left)`` of the image's edges about the apex in ``base_scan``."""
-    b_left, b_right = (float(b) for b in camera.column_bearings_scan(np.array([0.0, float(camera.info.width)])))
-    return b_right, b_left
+    """``(bearing_right, bearing_left)`` of the image's edges about the apex in ``base_scan`` (cached on
+    the camera for its image width, as :func:`camera_bound`)."""
+    cache = camera.__dict__.setdefault("_bound_bearings_cache", {})
+    key = float(camera.info.width)
+    out = cache.get(key)
+    if out is None:
+        b_left, b_right = (float(b) for b in camera.column_bearings_scan(np.array([0.0, key])))
+        out = (b_right, b_left)
+        cache.clear()
+        cache[key] = out
+    return out
 
 
 def assign_points(

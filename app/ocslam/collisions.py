@@ -168,6 +168,15 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                 rep.reject("collision")
 
 
+def _merge(a: Track, b: Track, cfg: ConsciousnessConfig, known_free: FreeFn | None, removed: set[int], rep: FrameReport) -> Track:
+    """Merge two same-class objects into the one with more evidence; returns the one merged away."""
+    keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
+    merge_tracks(keep, drop, cfg, known_free)
+    removed.add(drop.id)
+    rep.merged += 1
+    return drop
+
+
 def resolve_track_collisions(
     tracks: list[Track],
     touched: list[Track],
@@ -229,11 +238,7 @@ def resolve_track_collisions(
                             if loser is a:
                                 break
                         continue
-                    keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
-                    merge_tracks(keep, drop, cfg, known_free)
-                    removed.add(drop.id)
-                    rep.merged += 1
-                    if drop is a:
+                    if _merge(a, b, cfg, known_free, removed, rep) is a:
                         break
                     continue
                 same = d < thr or overlap_fraction(fa, fb) >= ov
@@ -252,13 +257,8 @@ def resolve_track_collisions(
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)
                     if len(gp.evidence.ray_origin):
                         same = along_ray_close(gp.evidence.ray_origin[-1], gp_fp.center, other_fp.center, thr)
-                if same:
-                    keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
-                    merge_tracks(keep, drop, cfg, known_free)
-                    removed.add(drop.id)
-                    rep.merged += 1
-                    if drop is a:
-                        break
+                if same and _merge(a, b, cfg, known_free, removed, rep) is a:
+                    break
             elif cfg.point_ownership and a.evidence.has_points and b.evidence.has_points:
                 # Objects of different classes, both with LIDAR points: ownership of the points they
                 # share. Side by side (each on its own points) both stay. One nested in the other

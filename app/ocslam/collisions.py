@@ -168,6 +168,14 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                 rep.reject("collision")
 
 
+def _sharing(a: Track, b: Track, cfg: ConsciousnessConfig) -> tuple[FloatArray, FloatArray] | None:
+    """Both objects' well-seen points (:func:`strong_points`) if at least ``shared_evidence_fraction`` of
+    one's lie on the other's, else None."""
+    pa, pb = strong_points(a), strong_points(b)
+    sa, sb = shared_fractions(pa, pb, cfg)
+    return (pa, pb) if max(sa, sb) >= float(cfg.shared_evidence_fraction) else None
+
+
 def _merge(a: Track, b: Track, cfg: ConsciousnessConfig, known_free: FreeFn | None, removed: set[int], rep: FrameReport) -> Track:
     """Merge two same-class objects into the one with more evidence; returns the one merged away."""
     keep, drop = (a, b) if (a.presence, a.frames, a.detections) >= (b.presence, b.frames, b.detections) else (b, a)
@@ -225,14 +233,14 @@ def resolve_track_collisions(
                     # unless they rest on the same LIDAR points (one box's island was the other's object)
                     if not (cfg.point_ownership and a.evidence.has_points and b.evidence.has_points):
                         continue
-                    sa, sb = shared_fractions(strong_points(a), strong_points(b), cfg)
-                    if max(sa, sb) < float(cfg.shared_evidence_fraction):
+                    shared = _sharing(a, b, cfg)
+                    if shared is None:
                         continue
                     if not one_instance(a, b):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own
-                        loser, other = (a, b) if fa.area >= fb.area else (b, a)
-                        if not strip_points(loser, strong_points(other), cfg, known_free):
+                        loser, other_pts = (a, shared[1]) if fa.area >= fb.area else (b, shared[0])
+                        if not strip_points(loser, other_pts, cfg, known_free):
                             removed.add(loser.id)
                             rep.removed += 1
                             if loser is a:
@@ -264,13 +272,14 @@ def resolve_track_collisions(
                 # share. Side by side (each on its own points) both stay. One nested in the other
                 # (a chair pushed under a table's edge) keeps the shared points, the larger loses
                 # them. Otherwise (two labels on one object) the one with more evidence stays.
-                pa, pb = strong_points(a), strong_points(b)
-                sa, sb = shared_fractions(pa, pb, cfg)
-                if max(sa, sb) < float(cfg.shared_evidence_fraction):
+                shared = _sharing(a, b, cfg)
+                if shared is None:
                     continue
-                (small, small_fp), (big, big_fp) = ((a, fa), (b, fb)) if fa.area <= fb.area else ((b, fb), (a, fa))
+                (small, small_fp, small_pts), (big, big_fp) = (
+                    ((a, fa, shared[0]), (b, fb)) if fa.area <= fb.area else ((b, fb, shared[1]), (a, fa))
+                )
                 if small_fp.area < 0.5 * big_fp.area and not small.partial_only:
-                    if strip_points(big, strong_points(small), cfg, known_free):
+                    if strip_points(big, small_pts, cfg, known_free):
                         continue
                     drop = big
                 else:

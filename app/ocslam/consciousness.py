@@ -419,6 +419,7 @@ class Consciousness:
 
         # association, evidence, presence
         touched: list[Track] = []
+        seen_through: list[tuple[Candidate, Track]] = []  # each candidate's track, in candidate order
         for cand in candidates:
             if cand is None or cand.status == "collision":
                 continue
@@ -436,16 +437,12 @@ class Consciousness:
                 cand.status = "updated"
             cand.track_id = t.id
             t.near_range = cand.near_range
+            seen_through.append((cand, t))
             if t not in touched:
                 touched.append(t)
         # negative evidence: points of each object seen now outside the box that saw it (a neighbour's)
         ratio = float(cfg.outside_ratio)
-        for cand in candidates:
-            if cand is None or cand.track_id is None or cand.status == "collision":
-                continue
-            t = next((tr for tr in touched if tr.id == cand.track_id), None)
-            if t is None:
-                continue
+        for cand, t in seen_through:
             ev = t.evidence
             changed = ev.outside_ratio != ratio
             ev.outside_ratio = ratio

@@ -21,13 +21,9 @@ from numpy.typing import NDArray
 
 from app.ocslam.camera import CameraModel
 from app.ocslam.projection import BoundingArea, camera_bound_bearings
-from app.ocslam.se2 import Pose2
+from app.ocslam.se2 import Pose2, wrap_angle
 
 FloatArray = NDArray[np.float64]
-
-
-def _wrap(a: FloatArray) -> FloatArray:
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def lidar_sees(
@@ -44,7 +40,7 @@ def lidar_sees(
     r = np.hypot(p[:, 0], p[:, 1])
     b = np.arctan2(p[:, 1], p[:, 0])
     full = abs(increment) * n >= 2.0 * np.pi - 1e-6
-    k = np.rint(_wrap(b - angle_min) / increment if full else (b - angle_min) / increment).astype(np.int64)
+    k = np.rint(wrap_angle(b - angle_min) / increment if full else (b - angle_min) / increment).astype(np.int64)
     seen = np.zeros(len(p), dtype=bool)
     for d in (-1, 0, 1):
         j = k + d
@@ -88,9 +84,9 @@ def seen_outside(
     p = T_map_scan.inverse().transform_points(pm)
     b, r = camera.bearing_ranges_scan(p)
     b_right, b_left = camera_bound_bearings(camera)
-    half_img = 0.5 * float(_wrap(np.array(b_left - b_right)))
+    half_img = 0.5 * float(wrap_angle(b_left - b_right))
     mid_img = b_right + half_img
-    in_image = (np.abs(_wrap(b - mid_img)) < half_img - border_rad) & (r <= max_range_m) & (r > 0.05)
+    in_image = (np.abs(wrap_angle(b - mid_img)) < half_img - border_rad) & (r <= max_range_m) & (r > 0.05)
     if not in_image.any():
         return out
     idx = np.flatnonzero(in_image)
@@ -101,7 +97,7 @@ def seen_outside(
         return out
     idx = idx[seen]
     half = float(area.half_angle)
-    rel = np.abs(_wrap(b[idx] - (area.bearing_right + half)))  # from the wedge's middle
+    rel = np.abs(wrap_angle(b[idx] - (area.bearing_right + half)))  # from the wedge's middle
     w = np.asarray(weights, dtype=np.float64).reshape(-1)[idx]
     inside = rel <= half
     if float(w[inside].sum()) < 0.5 * float(w.sum()):

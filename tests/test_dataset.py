@@ -34,6 +34,16 @@ def test_plan_splits_by_world(seed: int, n: int, frac: float, apartment: bool) -
     assert not {t.world_seed for t in tasks if t.kind == "random"} & {t.world_seed for t in other if t.kind == "random"}
 
 
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 40), st.lists(st.sampled_from(["rooms", "corridor", "lshape", "openplan"]), min_size=1, max_size=4))
+def test_plan_cycles_the_layout_families(n: int, families: list[str]) -> None:
+    tasks = plan_worlds(DatasetOptions(out=Path("x"), worlds=n, seed=3, families=tuple(families), apartment=False))
+    assert [t.family for t in tasks] == [families[i % len(families)] for i in range(n)]
+    # the families do not change which worlds (seeds) or which split: only their layouts
+    plain = plan_worlds(DatasetOptions(out=Path("x"), worlds=n, seed=3, families=("rooms",), apartment=False))
+    assert [(t.world_seed, t.split) for t in tasks] == [(t.world_seed, t.split) for t in plain]
+
+
 def test_parse_imgsz() -> None:
     assert parse_imgsz("320x240") == (320, 240)
     assert parse_imgsz("640×480") == (640, 480)
@@ -62,6 +72,11 @@ def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
         progress=False,
     )
     assert meta["images"] == {"train": 8, "val": 3}
+    # world i is of family i mod 4 (the default: every layout family)
+    assert meta["families"] == ["rooms", "corridor", "lshape", "openplan"]
+    worlds = set(meta["train_worlds"]) | set(meta["val_worlds"])
+    assert worlds == {"apartment", "random_world(5000)", "random_world(5001, family='corridor')",
+                      "random_world(5002, family='lshape')"}
     assert not set(meta["train_worlds"]) & set(meta["val_worlds"])
     assert "apartment" in meta["train_worlds"] and len(meta["val_worlds"]) == 1
     data = yaml.safe_load((out / "data.yaml").read_text())

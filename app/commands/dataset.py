@@ -2,7 +2,7 @@
 
     ocslam dataset --worlds 40 --per-world 45 --seed 1 --out datasets/sim [--workers 2] [--imgsz 320x240]
 
-World i is random_world(1000·seed + i); a seeded share of them (--val-fraction) is the validation split,
+World i is random_world(1000·seed + i) of family i mod len(--families) (default all four); a seeded share of them (--val-fraction) is the validation split,
 the apartment is training data. Labels are the tight boxes of each object's visible pixels, kept when
 at least --min-pixels are visible and at least --min-visible of the object (see docs/detector.md).
 """
@@ -34,6 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--min-box", type=float, default=8.0, help="label only boxes whose shorter side is this long (px, image scaled to 224 px wide)"
     )
+    p.add_argument(
+        "--families",
+        default="rooms,corridor,lshape,openplan",
+        help="random_world layout families, comma-separated; world i is of family i mod their number "
+        "(default: all four; 'rooms' is the recipe before 2026-12-03)",
+    )
     p.add_argument("--no-randomize", action="store_true", help="no domain randomisation (plain renders)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -47,6 +53,14 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if not 0.0 <= args.val_fraction <= 1.0 or not 0.0 <= args.min_visible <= 1.0:
         print("ocslam: error: dataset: --val-fraction and --min-visible must be in [0, 1]", file=sys.stderr)
+        return 2
+    from app.training.dataset import ALL_FAMILIES
+
+    families = tuple(f.strip() for f in str(args.families).split(",") if f.strip())
+    unknown = [f for f in families if f not in ALL_FAMILIES]
+    if not families or unknown:
+        print(f"ocslam: error: dataset: --families must name some of {', '.join(ALL_FAMILIES)}"
+              + (f" (unknown: {', '.join(unknown)})" if unknown else ""), file=sys.stderr)
         return 2
     try:
         imgsz = parse_imgsz(args.imgsz)
@@ -65,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         apartment_images=args.apartment_images,
         label_filter=LabelFilter(args.min_pixels, args.min_visible, args.min_box, min_in_frame_fraction=args.min_in_frame),
         randomize=not args.no_randomize,
+        families=families,
         command=command_line(),
     )
     import signal

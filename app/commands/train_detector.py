@@ -39,10 +39,11 @@ if TYPE_CHECKING:
     from app.training.train import TrainOptions
 
 #: The dataset recipe of the committed model (app.training.dataset.DatasetOptions defaults).
-DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --out {out}"
+DEFAULT_DATASET_COMMAND = "ocslam dataset --worlds 40 --per-world 45 --seed 1 --families rooms --out {out}"
 #: The calibration renders of the committed int8 model (six training worlds and the apartment, the app's 320×240).
 CALIB_DATASET_COMMAND = (
-    "ocslam dataset --worlds 6 --per-world 15 --seed 1 --imgsz 320x240 --apartment-images 30 --val-fraction 0 --out {out}"
+    "ocslam dataset --worlds 6 --per-world 15 --seed 1 --families rooms --imgsz 320x240 --apartment-images 30 "
+    "--val-fraction 0 --out {out}"
 )
 
 
@@ -50,8 +51,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--data",
         type=Path,
-        default=Path("datasets/sim"),
-        help="dataset folder (with data.yaml) from `ocslam dataset`; rendered with the default recipe if missing",
+        action="append",
+        default=None,
+        help="dataset folder (with data.yaml) from `ocslam dataset` (default datasets/sim, rendered with the "
+        "committed model's recipe if missing); repeat it to train on the union of several datasets",
     )
     p.add_argument("--model", default="yolov8n.yaml", help="ultralytics model yaml (no pretrained weights): yolov8n.yaml, yolo11n.yaml")
     p.add_argument("--init-weights", type=Path, default=None,
@@ -68,6 +71,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="this session's time budget in hours: it ends at the last epoch that fits (0: off); the schedule "
                         "is --epochs, continued by --resume")
     p.add_argument("--batch", type=int, default=16)
+    p.add_argument("--lr0", type=float, default=None,
+                   help="initial learning rate (default: ultralytics' choice for the optimizer); low to refine a model")
+    p.add_argument("--warmup-epochs", type=float, default=None,
+                   help="learning-rate warm-up epochs (default ultralytics' 3; 0 to refine a trained model)")
+    p.add_argument("--optimizer", choices=("auto", "SGD", "AdamW", "Adam"), default=None,
+                   help="optimizer (default auto: ultralytics picks by the run's length)")
     p.add_argument("--patience", type=int, default=15, help="stop after this many epochs without a better val mAP")
     p.add_argument("--workers", type=int, default=2, help="data loader processes")
     p.add_argument("--seed", type=int, default=0)
@@ -111,8 +120,26 @@ def run(args: argparse.Namespace) -> int:
         if not args.init_onnx.is_file():
             print(f"ocslam: error: --init-onnx: no ONNX model at {args.init_onnx}", file=sys.stderr)
             return 2
+    datasets = list(args.data or [Path("datasets/sim")])
+    bad = [str(d) for d in datasets if len(datasets) > 1 and not ((d / "data.yaml").is_file() or d.is_file())]
+    if bad:
+        print(f"ocslam: error: --data: no dataset (data.yaml) at {', '.join(bad)}", file=sys.stderr)
+        return 2
+    args.data = datasets[0]
+    for name, bound in (("lr0", (0.0, 1.0)), ("warmup_epochs", (0.0, 100.0))):
+        v = getattr(args, name)
+        if v is not None and not bound[0] <= v <= bound[1]:
+            print(f"ocslam: error: --{name.replace('_', '-')} must be in [{bound[0]:g}, {bound[1]:g}]", file=sys.stderr)
+            return 2
+    extra = {k: v for k, v in (("lr0", args.lr0), ("warmup_epochs", args.warmup_epochs), ("optimizer", args.optimizer))
+             if v is not None}
+    if args.resume and extra:
+        print("ocslam: error: --resume continues the saved run's schedule; --lr0/--warmup-epochs/--optimizer "
+              "apply to a new run", file=sys.stderr)
+        return 2
     opts = TrainOptions(
         data=args.data,
+        extra=extra,
         model=args.model,
         imgsz=args.imgsz,
         epochs=args.epochs if args.epochs is not None else (0 if args.resume else 60),
@@ -143,10 +170,18 @@ def run(args: argparse.Namespace) -> int:
     if not (args.data / "data.yaml").exists() and not args.data.is_file():
         from app.training.dataset import DatasetOptions, build_dataset
 
-        recipe = DatasetOptions(out=args.data)
+        recipe = DatasetOptions(out=args.data, families=("rooms",))
         recipe.command = DEFAULT_DATASET_COMMAND.format(out=args.data)
         print(f"no dataset at {args.data}: rendering one first ({recipe.command})")
         build_dataset(recipe)
+    if len(datasets) > 1:
+        from app.training.train import combine_datasets
+
+        try:
+            opts.data = combine_datasets(datasets, Path(opts.runs_dir) / opts.name / "data.yaml")
+        except (FileNotFoundError, ValueError) as e:
+            print(f"ocslam: error: --data: {e}", file=sys.stderr)
+            return 2
     if args.init_onnx is not None:
         rc = _init_from_onnx(args, opts)
         if rc:

@@ -21,9 +21,13 @@ colour jitter; distractor objects of no class (``pybullet_data/random_urdfs``, s
 camera height and pitch jitter; sensor effects (gamma/contrast/colour balance, blur, motion blur,
 Gaussian noise).
 
+**Layout families**: world ``i`` of a dataset made with ``--seed S`` and ``--families F₀,F₁,…`` is
+``random_world(1000·S + i, family=F[i mod len(F)])`` (default: all four families, ``rooms``, ``corridor``,
+``lshape``, ``openplan``, so the detector sees the furniture groups and layouts the app meets; ``--families
+rooms`` is the recipe of datasets made before 2026-12-03). Datasets with different seeds share no world.
+
 **Split by world**: a seeded choice of random worlds is the validation split; the apartment is always
-training data; no world is in both. World ``i`` of a dataset made with ``--seed S`` is
-``random_world(1000·S + i)``, so datasets with different seeds share no world.
+training data; no world is in both.
 
 Output (``DIR``): ``images/{train,val}/*.png``, ``labels/{train,val}/*.txt`` (YOLO), ``data.yaml``
 (ultralytics; the 11 classes in ``CLASS_NAMES`` order; an ``ocslam`` block with the command, seed and
@@ -65,6 +69,8 @@ __all__ = [
 ]
 
 APARTMENT = "assets/worlds/apartment.yaml"
+#: every layout family of ``random_world`` (the default of ``--families``)
+ALL_FAMILIES: tuple[str, ...] = ("rooms", "corridor", "lshape", "openplan")
 
 
 @dataclass
@@ -83,6 +89,7 @@ class DatasetOptions:
     distractors: tuple[int, int] = (2, 8)
     rerandomize_every: int = 10
     empty_keep_prob: float = 0.15  # keep this share of views in which no object is labelled
+    families: tuple[str, ...] = ALL_FAMILIES  # world i is of family families[i mod len(families)]
     command: str | None = None
 
 
@@ -112,6 +119,7 @@ class WorldTask:
     world_seed: int  # random_world seed (random) or 0
     split: str  # "train" | "val"
     images: int
+    family: str = "rooms"  # random_world layout family (random worlds)
 
 
 def plan_worlds(opts: DatasetOptions) -> list[WorldTask]:
@@ -124,8 +132,10 @@ def plan_worlds(opts: DatasetOptions) -> list[WorldTask]:
     elif opts.val_fraction >= 1.0:
         n_val = n
     val = set(rng.permutation(n)[:n_val].tolist()) if n_val else set()
+    fams = tuple(opts.families) or ("rooms",)
     tasks = [
-        WorldTask(i, "random", 1000 * int(opts.seed) + i, "val" if i in val else "train", int(opts.per_world))
+        WorldTask(i, "random", 1000 * int(opts.seed) + i, "val" if i in val else "train", int(opts.per_world),
+                  fams[i % len(fams)])
         for i in range(n)
     ]
     if opts.apartment:
@@ -165,7 +175,10 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
 
     if progress is None and _progress_queue is not None:
         progress = _progress_queue.put
-    world = load_world(resolve_path(APARTMENT)) if task.kind == "apartment" else random_world(task.world_seed)
+    if task.kind == "apartment":
+        world = load_world(resolve_path(APARTMENT))
+    else:
+        world = random_world(task.world_seed, family=task.family)
     cfg = Config()
     W, H = opts.imgsz
     rng = np.random.default_rng([int(opts.seed), int(task.index), 0x5EED])
@@ -177,7 +190,8 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
     lbl_dir.mkdir(parents=True, exist_ok=True)
     class_of = {i: CLASS_INDEX[o.label] for i, o in enumerate(world.objects)}
     base_z = float(sim.robot_model.T_base_camera_optical[2, 3])
-    world_name = "apartment" if task.kind == "apartment" else f"random_world({task.world_seed})"
+    fam = "" if task.family == "rooms" else f", family={task.family!r}"
+    world_name = "apartment" if task.kind == "apartment" else f"random_world({task.world_seed}{fam})"
     silhouettes = SilhouetteRenderer(world, cfg.camera.near_m, cfg.camera.far_m)
     with tempfile.TemporaryDirectory(prefix="ocslam-tex-") as tmp:
         rz = Randomizer(sim, rng, Path(tmp), opts.distractors if opts.randomize else (0, 0))
@@ -381,6 +395,7 @@ def build_dataset(opts: DatasetOptions, progress: bool = True, *, render: Callab
         "worlds": int(opts.worlds),
         "per_world": int(opts.per_world),
         "imgsz": list(opts.imgsz),
+        "families": list(opts.families),
         "images": {s: len(r) for s, r in by_split.items()},
         "boxes": {s: sum(c.values()) for s, c in counts.items()},
         "train_worlds": worlds["train"],

@@ -157,6 +157,39 @@ def _data_yaml(data: Path) -> Path:
     return y
 
 
+def combine_datasets(datasets: list[Path], out_yaml: Path) -> Path:
+    """One ultralytics data file training on the union of several ``ocslam dataset`` folders (their
+    train and val images, by absolute path); its ``ocslam`` block lists each dataset's recipe and counts
+    (the model card's lineage). Returns ``out_yaml``."""
+    trains, vals, parts = [], [], []
+    for d in datasets:
+        y = _data_yaml(d)
+        meta = yaml.safe_load(y.read_text())
+        root = Path(meta["path"]).resolve() if meta.get("path") else y.parent.resolve()
+        trains.append(str(root / meta.get("train", "images/train")))
+        vals.append(str(root / meta.get("val", "images/val")))
+        o = meta.get("ocslam", {}) or {}
+        parts.append({"path": str(d), **{k: o.get(k) for k in ("command", "seed", "images", "families", "train_worlds", "val_worlds")}})
+    images = {s: sum(int((p.get("images") or {}).get(s, 0)) for p in parts) for s in ("train", "val")}
+    data = {
+        "train": trains,
+        "val": vals,
+        "nc": len(CLASS_NAMES),
+        "names": dict(enumerate(CLASS_NAMES)),
+        "ocslam": {
+            "command": " + ".join(str(p["command"]) for p in parts),
+            "images": images,
+            "train_worlds": [w for p in parts for w in (p.get("train_worlds") or [])],
+            "val_worlds": [w for p in parts for w in (p.get("val_worlds") or [])],
+            "datasets": parts,
+        },
+    }
+    out_yaml.parent.mkdir(parents=True, exist_ok=True)
+    out_yaml.write_text("# the union of several `ocslam dataset` folders (ocslam train-detector --data A --data B)\n"
+                        + yaml.safe_dump(data, sort_keys=False))
+    return out_yaml
+
+
 def _metrics_from_csv(csv_path: Path) -> tuple[list[dict[str, float]], dict[str, float] | None]:
     """Rows of ultralytics' results.csv and the best row by mAP50-95 (its fitness)."""
     if not csv_path.exists():
@@ -335,6 +368,8 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
         "dataset": {
             "path": str(Path(opts.data)),
             "command": dataset_meta.get("command"),
+            "parts": [{k: p.get(k) for k in ("path", "command", "seed", "images", "families")}
+                      for p in dataset_meta.get("datasets", [])] or None,
             "seed": dataset_meta.get("seed"),
             "images": dataset_meta.get("images"),
             "train_worlds": dataset_meta.get("train_worlds"),
@@ -348,6 +383,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "imgsz": opts.imgsz,
             "batch": opts.batch,
             "patience": opts.patience,
+            "overrides": dict(opts.extra) or None,
             "time_budget_h": opts.hours,
             "initialised_from": str(opts.init_weights) if opts.init_weights else "random (from the model yaml)",
             "training_time_h": round(train_s / 3600.0, 3),

@@ -1,0 +1,72 @@
+"""``ocslam train-detector``'s arguments and the union of datasets, without the [train] extra."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from app.ocslam.messages import CLASS_NAMES
+from app.training.train import combine_datasets
+
+
+def _dataset(root: Path, seed: int, n_train: int, n_val: int, with_path: bool = False) -> Path:
+    for split in ("train", "val"):
+        (root / "images" / split).mkdir(parents=True)
+    meta = {
+        "train": "images/train",
+        "val": "images/val",
+        "nc": len(CLASS_NAMES),
+        "names": dict(enumerate(CLASS_NAMES)),
+        "ocslam": {"command": f"ocslam dataset --seed {seed}", "seed": seed, "images": {"train": n_train, "val": n_val},
+                   "families": ["rooms"], "train_worlds": [f"w{seed}a"], "val_worlds": [f"w{seed}b"]},
+    }
+    if with_path:
+        meta["path"] = str(root)
+    (root / "data.yaml").write_text(yaml.safe_dump(meta))
+    return root
+
+
+def test_combine_datasets_lists_both_folders_and_lineages(tmp_path: Path) -> None:
+    a = _dataset(tmp_path / "a", 1, 10, 2)
+    b = _dataset(tmp_path / "b", 2, 30, 4, with_path=True)
+    y = combine_datasets([a, b], tmp_path / "run" / "data.yaml")
+    d = yaml.safe_load(y.read_text())
+    assert d["train"] == [str((a / "images/train").resolve()), str((b / "images/train").resolve())]
+    assert d["val"] == [str((a / "images/val").resolve()), str((b / "images/val").resolve())]
+    assert [d["names"][i] for i in range(len(CLASS_NAMES))] == list(CLASS_NAMES)
+    o = d["ocslam"]
+    assert o["images"] == {"train": 40, "val": 6}
+    assert o["train_worlds"] == ["w1a", "w2a"] and o["val_worlds"] == ["w1b", "w2b"]
+    assert o["command"] == "ocslam dataset --seed 1 + ocslam dataset --seed 2"
+    assert [p["seed"] for p in o["datasets"]] == [1, 2]
+
+
+def test_combine_datasets_refuses_other_classes(tmp_path: Path) -> None:
+    a = _dataset(tmp_path / "a", 1, 1, 1)
+    b = _dataset(tmp_path / "b", 2, 1, 1)
+    meta = yaml.safe_load((b / "data.yaml").read_text())
+    meta["names"] = {0: "cat"}
+    (b / "data.yaml").write_text(yaml.safe_dump(meta))
+    with pytest.raises(ValueError, match="classes"):
+        combine_datasets([a, b], tmp_path / "c.yaml")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--data", "{a}", "--data", "{missing}"], "no dataset (data.yaml) at"),
+        (["--data", "{a}", "--lr0", "2"], "--lr0 must be in"),
+        (["--data", "{a}", "--warmup-epochs", "-1"], "--warmup-epochs must be in"),
+        (["--data", "{a}", "--resume", "--lr0", "0.001"], "--resume continues the saved run's schedule"),
+    ],
+)
+def test_bad_training_arguments_are_one_line_errors(tmp_path: Path, capsys, argv: list[str], message: str) -> None:
+    from app.cli import main
+
+    a = _dataset(tmp_path / "a", 1, 1, 1)
+    argv = [s.format(a=a, missing=tmp_path / "nowhere") for s in argv]
+    assert main(["train-detector", *argv, "--runs", str(tmp_path / "runs")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1

@@ -373,6 +373,13 @@ class ConsciousnessConfig:
         "(a stool's legs that joined a round table from behind it; 0: off)",
         live=True,
     )
+    ray_centre_sigma_m: float = param(
+        0.1, min=0.0, max=1.0, step=0.01, unit="m",
+        help="improved: where an object's bisector rays fix its centre to this (their residual over their spread of "
+        "directions), points beyond the object's reach of that centre do not shape it (a stool behind a round table, "
+        "a box beside a shelf; 0: off)",
+        live=True,
+    )
     range_contest_slack: float = param(
         0.1, min=0.0, max=2.0, step=0.01,
         help="improved, with point ownership: a point inside several boxes' wedges is lost by a box whose bottom-edge "

@@ -78,6 +78,9 @@ class ObjectEvidence:
         #: which voxels still shape the object (:meth:`trusted`)
         self.outside = np.zeros(0, dtype=np.int64)
         self.outside_ratio = 0.0
+        #: ``consciousness.ray_centre_sigma_m`` (0: off): where the bisector rays fix the centre this well,
+        #: voxels farther from it than the object can reach do not shape it (:func:`app.ocslam.footprint.ray_centre`)
+        self.ray_centre_sigma = 0.0
         self.ray_origin = np.zeros((0, 2))
         self.ray_dir = np.zeros((0, 2))
         self.ray_weight = np.zeros(0)

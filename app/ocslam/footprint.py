@@ -286,6 +286,53 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
     return pts, hits, th, lo, hi
 
 
+def ray_centre(ev: ObjectEvidence) -> tuple[FloatArray, float] | None:
+    """``(centre (2,), σ (m))``: where the object's weighted bisector rays cross (least squares, object
+    frame) and how well they fix it: the rays' 90th-percentile residual over the square root of the
+    smallest eigenvalue of their information matrix (rays from one direction fix nothing along it).
+    ``None`` with fewer than four rays or parallel ones."""
+    use = ev.ray_weight > 1e-6
+    if int(np.count_nonzero(use)) < 4:
+        return None
+    d, o, w = ev.ray_dir[use], ev.ray_origin[use], ev.ray_weight[use]
+    n = np.empty_like(d)
+    np.negative(d[:, 1], out=n[:, 0])
+    n[:, 1] = d[:, 0]
+    H = (n * w[:, None]).T @ n
+    (a, b), (_, c) = H.tolist()
+    lam_min = 0.5 * (a + c) - math.sqrt(max(0.25 * (a - c) ** 2 + b * b, 0.0))
+    if lam_min <= 1e-9:
+        return None
+    off = np.sum(n * o, axis=1)
+    try:
+        x = _solve2(H, (n * (w * off)[:, None]).sum(axis=0))
+    except np.linalg.LinAlgError:
+        return None
+    res = np.sort(np.abs(n @ x - off))
+    scale = max(float(res[int(0.9 * (len(res) - 1))]), 0.02)  # the 90th percentile: rays of two objects disagree
+    return x, scale / math.sqrt(lam_min)
+
+
+def _ray_consistent(ev: ObjectEvidence, pts: FloatArray) -> tuple[NDArray[np.bool_] | None, FloatArray | None]:
+    """``(keep, centre)``: where the rays fix the centre to ``ev.ray_centre_sigma`` (m), the voxels of
+    ``pts`` ``(N, 2)`` within the object's reach of it (half its widest apparent width, 15 % more, plus
+    twice σ and 5 cm; a stool's legs behind a round table are beyond it). ``(None, None)`` when the rays
+    do not decide (then every voxel counts); ``keep`` all False: none of the points is the object's."""
+    if ev.ray_centre_sigma <= 0.0:
+        return None, None
+    rc = ray_centre(ev)
+    if rc is None or rc[1] > ev.ray_centre_sigma:
+        return None, None
+    use = (ev.ray_weight > 1e-6) & np.isfinite(ev.ray_app)
+    if not use.any():
+        return None, None
+    c, sigma = rc
+    reach = 0.5 * float(np.percentile(ev.ray_app[use], 75.0)) * 1.15 + 2.0 * sigma + 0.05
+    dx, dy = pts[:, 0] - c[0], pts[:, 1] - c[1]
+    keep = dx * dx + dy * dy <= reach * reach
+    return (None, None) if keep.all() else (keep, c)
+
+
 def _extension_free(
     known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
 ) -> bool:
@@ -348,6 +395,16 @@ def estimate_footprint(
         return Footprint(np.asarray(np.linalg.solve(H, g), dtype=np.float64), yaw, a, b)
 
     pts, hits, th, lo, hi = _point_shape(ev)
+    keep, c_ray = _ray_consistent(ev, pts)
+    if keep is not None and c_ray is not None:
+        if int(np.count_nonzero(keep)) < 3:
+            # every point lies beyond the object's reach of where its rays cross: they are something else's
+            # (a box beside a shelf that the LIDAR sees through); the rays place it, at its nominal shape
+            d = ev.ray_dir[-1]
+            a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
+            return Footprint(c_ray, float(np.arctan2(d[1], d[0]) + np.pi / 2), a, b)
+        pts, hits = pts[keep], hits[keep]
+        th, lo, hi = min_area_rect(pts)
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
     d_obs = hi - lo
     mid = 0.5 * (lo + hi)
@@ -467,6 +524,9 @@ def estimate_footprint(
         H = H + (n_rect * w[:, None]).T @ n_rect
         g = g + (n_rect * (w * np.sum(n_rect * o_rect, axis=1))[:, None]).sum(axis=0)
     s_opt = _box_qp(H, g, s_lo, s_hi)
+    if c_ray is not None:
+        # the rays fixed the centre and the points were chosen around it: it stays there
+        s_opt = axes @ c_ray
     # the rectangle must still cover the observed points (unless they are over-extended)
     for i in range(2):
         cap = tan_max if i == tan_axis else max(dep_max, W[2])

@@ -81,6 +81,17 @@ class TrainResult:
     checkpoint: Path | None = None
 
 
+def _same_data(saved: Any, data_yaml: Path) -> bool:
+    """True if a checkpoint's ``data`` (path of its data file) names ``data_yaml`` or a file with the same text."""
+    if not saved:
+        return False
+    old = Path(str(saved))
+    try:
+        return old.resolve() == data_yaml.resolve() or old.read_text() == data_yaml.read_text()
+    except OSError:
+        return False
+
+
 def _resume_checkpoint(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> Path:
     """Prepare ``opts.checkpoint`` for ultralytics' ``resume``: a copy in this machine's run folder whose
     saved arguments point at this dataset and folder, with ``epochs`` raised to ``opts.epochs`` when
@@ -94,6 +105,10 @@ def _resume_checkpoint(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> P
     if not isinstance(ckpt, dict) or ckpt.get("optimizer") is None or int(ckpt.get("epoch", -1)) < 0:
         raise ValueError(f"--resume: {ck} is not a resumable checkpoint (no optimizer state or epoch counter)")
     ta = dict(ckpt.get("train_args") or {})
+    if not _same_data(ta.get("data"), data_yaml):
+        # other data: its validation figures are not comparable with the saved best, so the best epoch and
+        # early stopping start again (the weights, optimizer and learning-rate schedule go on)
+        ckpt["best_fitness"], ckpt["stopper"] = None, None
     save_dir = runs_dir / opts.name
     ta.update(data=str(data_yaml.resolve()), project=str(runs_dir), name=opts.name, save_dir=str(save_dir),
               exist_ok=True, device="cpu", workers=opts.workers, cache=opts.cache, time=None, plots=False)

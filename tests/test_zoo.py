@@ -46,7 +46,8 @@ def test_the_zoo_has_16_worlds_split_in_two_documented_halves():
     dev, test = set(split["dev"]), set(split["test"])
     assert not dev & test
     assert dev | test == names
-    assert abs(len(dev) - len(test)) <= 1
+    # one dev world per kind, and a second one for each kind whose test world failed (README's rule)
+    assert len(test) <= len(dev) <= 2 * len(test)
     readme = (ZOO_DIR / "README.md").read_text(encoding="utf-8")
     rows = [line for line in readme.splitlines() if line.startswith("| ") and "`" in line]
     for line in rows:  # a table row: | kind | dev world | test world |

@@ -97,8 +97,10 @@ class ObjectEvidence:
         self.leg_obs = 0
         #: bumped when ``points`` is changed in place (a correction); a new ``points`` array is a change too
         self.points_revision = 0
-        #: what :func:`app.ocslam.footprint.estimate_footprint` derived from these points (its cache)
+        #: what :func:`app.ocslam.footprint.estimate_footprint` derived from these points (its cache), and from
+        #: those of them within reach of the rays' crossing (keyed by the cached points and the chosen voxels)
         self.shape_cache: tuple | None = None
+        self.ray_shape_cache: tuple | None = None
 
     # -- accumulation ----------------------------------------------------------------------------
     @property

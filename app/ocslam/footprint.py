@@ -403,8 +403,14 @@ def estimate_footprint(
             d = ev.ray_dir[-1]
             a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
             return Footprint(c_ray, float(np.arctan2(d[1], d[0]) + np.pi / 2), a, b)
-        pts, hits = pts[keep], hits[keep]
-        th, lo, hi = min_area_rect(pts)
+        rc = ev.ray_shape_cache  # the same voxels as last time (the usual case): their rectangle is known
+        if rc is not None and rc[0] is pts and np.array_equal(rc[1], keep):
+            pts, hits, th, lo, hi = rc[2:]
+        else:
+            kept, hits = pts[keep], hits[keep]
+            th, lo, hi = min_area_rect(kept)
+            ev.ray_shape_cache = (pts, keep, kept, hits, th, lo, hi)
+            pts = kept
     axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
     d_obs = hi - lo
     mid = 0.5 * (lo + hi)

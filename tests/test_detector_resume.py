@@ -67,3 +67,28 @@ def test_resume_without_a_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
     data = _tiny_dataset(tmp_path / "data")
     with pytest.raises(FileNotFoundError, match="no checkpoint"):
         train_detector(_opts(tmp_path, data, resume=True), log=lambda *_: None)
+
+
+def test_resume_on_other_data_restarts_the_best_epoch_but_keeps_the_run(tmp_path: Path) -> None:
+    """Resumed with another dataset (e.g. ``--data A --data B``), the saved best fitness and early-stopping
+    state are dropped (validation figures of other data are not comparable); the weights, optimizer
+    and epoch counter are kept. Resumed with the same data, everything is kept."""
+    torch = pytest.importorskip("torch")
+    from app.training.train import _resume_checkpoint
+
+    a = _tiny_dataset(tmp_path / "a")
+    b = _tiny_dataset(tmp_path / "b")
+    ck = tmp_path / "model" / "detector-train.pt"
+    ck.parent.mkdir(parents=True)
+    saved = {"epoch": 4, "optimizer": {"state": {}, "param_groups": []}, "best_fitness": 0.61,
+             "stopper": {"best_fitness": 0.61, "best_epoch": 3},
+             "train_args": {"data": str((a / "data.yaml").resolve()), "epochs": 10}}
+    torch.save(saved, str(ck))
+    same = torch.load(str(_resume_checkpoint(_opts(tmp_path, a, resume=True), a / "data.yaml", tmp_path / "runs")),
+                      weights_only=False)
+    assert same["best_fitness"] == 0.61 and same["stopper"]["best_epoch"] == 3
+    other = torch.load(str(_resume_checkpoint(_opts(tmp_path, b, resume=True), b / "data.yaml", tmp_path / "runs")),
+                       weights_only=False)
+    assert other["best_fitness"] is None and other["stopper"] is None
+    assert other["epoch"] == 4 and other["optimizer"] is not None
+    assert other["train_args"]["data"] == str((b / "data.yaml").resolve()) and other["train_args"]["epochs"] == 10

@@ -70,3 +70,16 @@ def test_bad_training_arguments_are_one_line_errors(tmp_path: Path, capsys, argv
     assert main(["train-detector", *argv, "--runs", str(tmp_path / "runs")]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
+
+
+def test_same_data_is_the_same_file_or_the_same_text(tmp_path: Path) -> None:
+    from app.training.train import _same_data
+
+    a = _dataset(tmp_path / "a", 1, 1, 1)
+    copy = tmp_path / "copy.yaml"
+    copy.write_text((a / "data.yaml").read_text())
+    b = _dataset(tmp_path / "b", 2, 1, 1)
+    assert _same_data(str(a / "data.yaml"), a / "data.yaml")
+    assert _same_data(str(copy), a / "data.yaml")  # another machine's path to the same dataset
+    assert not _same_data(str(b / "data.yaml"), a / "data.yaml")
+    assert not _same_data(str(tmp_path / "gone.yaml"), a / "data.yaml") and not _same_data(None, a / "data.yaml")

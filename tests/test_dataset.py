@@ -101,3 +101,51 @@ def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
                 assert all(0.0 <= float(v) <= 1.0 for v in r[1:])
     samples = load_samples(out, "all")
     assert len(samples) == 11 and samples[0].load().shape == (120, 160, 3)
+
+
+def test_overlay_mesh_file_known_answer(tmp_path: Path) -> None:
+    from app.training.randomization import write_quad_obj
+
+    quads = [(np.zeros(3), np.array([2.0, 0, 0]), np.array([0, 1.0, 0]), 0.5)]
+    obj = write_quad_obj(quads, tmp_path / "q.obj", material="q.mtl")
+    lines = obj.read_text().splitlines()
+    assert "mtllib q.mtl" in lines and "usemtl m" in lines
+    v = [[float(x) for x in ln.split()[1:]] for ln in lines if ln.startswith("v ")]
+    vt = [[float(x) for x in ln.split()[1:]] for ln in lines if ln.startswith("vt ")]
+    vn = [[float(x) for x in ln.split()[1:]] for ln in lines if ln.startswith("vn ")]
+    assert v == [[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]]
+    assert vt == [[0, 0], [4, 0], [4, 2], [0, 2]]  # the texture repeats every 0.5 m
+    assert vn == [[0, 0, 1]] * 4
+    assert [ln for ln in lines if ln.startswith("f ")] == ["f 1/1/1 2/2/2 3/3/3", "f 1/1/1 3/3/3 4/4/4"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("renderer", ["tiny", "egl"])
+def test_randomised_floor_is_textured_in_both_renderers(renderer: str, tmp_path: Path) -> None:
+    """The floor overlay shows its texture (a checkerboard's two colours) in TinyRenderer and in the
+    app's EGL renderer (which ignores a ``textureUniqueId`` set by ``changeVisualShape`` in a busy scene)."""
+    from app.config import Config
+    from app.ocslam.se2 import Pose2
+    from app.sim_world import SimWorld, probe_egl
+    from app.training import randomization
+    from app.training.randomization import Randomizer
+    from app.world.generator import random_world
+
+    if renderer == "egl" and not probe_egl()[0]:
+        pytest.skip("EGL does not load here")
+    world = random_world(7000)
+    sim = SimWorld(world, Config(), seed=7000, renderer=renderer)
+    try:
+        rz = Randomizer(sim, np.random.default_rng(0), tmp_path, (0, 0))
+        kinds = randomization.TEXTURE_KINDS
+        randomization.TEXTURE_KINDS = ("checker",)  # the floor's kinds are read at each randomisation
+        try:
+            rz.randomize_scene()
+        finally:
+            randomization.TEXTURE_KINDS = kinds
+        o = world.objects[0]
+        frame = sim.render_view(Pose2(o.x - 1.5, o.y, 0.0), width=160, height=120, segmentation=False)
+        floor = frame.image.data[-15:, :, :].reshape(-1, 3).astype(float)
+        assert floor.std(axis=0).max() > 20.0  # two colours, not the plain white of an untextured overlay
+    finally:
+        sim.close()

@@ -40,6 +40,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="random_world layout families, comma-separated; world i is of family i mod their number "
         "(default: all four; 'rooms' is the recipe before 2026-12-03)",
     )
+    p.add_argument(
+        "--renderer",
+        choices=("tiny", "egl", "auto"),
+        default=None,
+        help="camera renderer: tiny (TinyRenderer, the committed models' data; default, or OCSLAM_RENDERER), egl (the "
+        "app's renderer where it loads, Mesa's llvmpipe), auto (egl where it loads)",
+    )
     p.add_argument("--no-randomize", action="store_true", help="no domain randomisation (plain renders)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -67,6 +74,15 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"ocslam: error: dataset: {e}", file=sys.stderr)
         return 2
+    extra = {"renderer": args.renderer} if args.renderer else {}
+    if args.renderer == "egl":
+        from app.sim.renderer import RendererError, resolve_renderer
+
+        try:
+            resolve_renderer("egl")
+        except RendererError as e:
+            print(f"ocslam: error: dataset: {e}", file=sys.stderr)
+            return 2
     opts = DatasetOptions(
         out=args.out,
         worlds=args.worlds,
@@ -81,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         randomize=not args.no_randomize,
         families=families,
         command=command_line(),
+        **extra,
     )
     import signal
 

@@ -90,6 +90,9 @@ class DatasetOptions:
     rerandomize_every: int = 10
     empty_keep_prob: float = 0.15  # keep this share of views in which no object is labelled
     families: tuple[str, ...] = ALL_FAMILIES  # world i is of family families[i mod len(families)]
+    #: camera renderer (``sim.renderer``): ``tiny`` (every committed model's data), ``egl`` (the app's where it
+    #: loads; its images differ in shading), ``auto``
+    renderer: str = field(default_factory=lambda: os.environ.get("OCSLAM_RENDERER", "tiny"))
     command: str | None = None
 
 
@@ -182,7 +185,7 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
     cfg = Config()
     W, H = opts.imgsz
     rng = np.random.default_rng([int(opts.seed), int(task.index), 0x5EED])
-    sim = SimWorld(world, cfg, seed=int(task.world_seed), renderer=os.environ.get("OCSLAM_RENDERER", "tiny"))  # EGL skips the vertex-array overlays
+    sim = SimWorld(world, cfg, seed=int(task.world_seed), renderer=opts.renderer)
     records: list[dict] = []
     img_dir = Path(opts.out) / "images" / task.split
     lbl_dir = Path(opts.out) / "labels" / task.split
@@ -396,6 +399,7 @@ def build_dataset(opts: DatasetOptions, progress: bool = True, *, render: Callab
         "per_world": int(opts.per_world),
         "imgsz": list(opts.imgsz),
         "families": list(opts.families),
+        "renderer": str(opts.renderer),
         "images": {s: len(r) for s, r in by_split.items()},
         "boxes": {s: sum(c.values()) for s, c in counts.items()},
         "train_worlds": worlds["train"],

@@ -70,21 +70,31 @@ def make_texture(kind: str, rng: np.random.Generator, size: int = 128) -> np.nda
 TEXTURE_KINDS = ("planks", "tiles", "checker", "carpet", "stripes", "marble", "plain")
 
 
-def _quad_mesh_args(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]) -> dict[str, Any]:
-    """pybullet ``createVisualShape(GEOM_MESH, ...)`` arguments for planar quads ``(origin, u_vec, v_vec, tile)``
-    (corners ``o``, ``o+u``, ``o+u+v``, ``o+v``), texture repeating every ``tile`` metres."""
-    verts, idx, uvs, normals = [], [], [], []
-    for o, u, v, tile in quads:
+def write_quad_obj(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]], path: Path, material: str | None = None) -> Path:
+    """Write planar quads ``(origin, u_vec, v_vec, tile)`` (corners ``o``, ``o+u``, ``o+u+v``, ``o+v``,
+    texture repeating every ``tile`` metres) as a Wavefront OBJ mesh with UVs and normals, using the first
+    material of the ``material`` file (beside it) if given; returns ``path``.
+
+    A mesh *file*, not pybullet's vertex arrays: the EGL renderer plugin draws only meshes it can load
+    by file name (vertex-array meshes are skipped with "issue extracting mesh"), TinyRenderer draws both."""
+    lines = ["# OCSLAM dataset overlay (app/training/randomization.py)"]
+    if material:
+        lines += [f"mtllib {material}", "usemtl m"]
+    faces = []
+    for q, (o, u, v, tile) in enumerate(quads):
         n = np.cross(u, v)
         n = n / (np.linalg.norm(n) or 1.0)
-        k = len(verts)
         lu, lv = np.linalg.norm(u) / tile, np.linalg.norm(v) / tile
-        for c, uv in ((o, (0, 0)), (o + u, (lu, 0)), (o + u + v, (lu, lv)), (o + v, (0, lv))):
-            verts.append(c.tolist())
-            uvs.append(list(uv))
-            normals.append(n.tolist())
-        idx += [k, k + 1, k + 2, k, k + 2, k + 3]
-    return dict(vertices=verts, indices=idx, uvs=uvs, normals=normals)
+        for c, uv in ((o, (0.0, 0.0)), (o + u, (lu, 0.0)), (o + u + v, (lu, lv)), (o + v, (0.0, lv))):
+            lines.append("v {:.6f} {:.6f} {:.6f}".format(*c))
+            lines.append(f"vt {uv[0]:.6f} {uv[1]:.6f}")
+            lines.append("vn {:.6f} {:.6f} {:.6f}".format(*n))
+        k = 4 * q + 1  # OBJ indices are 1-based; vertex k has uv k and normal k
+        faces += [(k, k + 1, k + 2), (k, k + 2, k + 3)]
+    lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in faces]
+    path = Path(path)
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 class Randomizer:
@@ -109,20 +119,19 @@ class Randomizer:
 
         self.urdfs = sorted((Path(pybullet_data.getDataPath()) / "random_urdfs").glob("*/*.urdf"))
         self._blocking = None
-        self.floor_overlay = self._make_floor_overlay()
-        self.wall_overlay = self._make_wall_overlay()
+        # the floor's and the walls' quads; their textured meshes are made by randomize_scene
+        self.floor_quads = self._floor_quads()
+        self.wall_quads = self._wall_quads()
+        self.floor_overlay: int | None = None
+        self.wall_overlay: int | None = None
 
     # -- overlays (textured surfaces) --------------------------------------------------------
-    def _make_floor_overlay(self) -> int:
-        p, cid = self.p, self.cid
+    def _floor_quads(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
         xmin, ymin, xmax, ymax = self.sim.world.bounds()
         o = np.array([xmin - 1, ymin - 1, 0.0008])
-        args = _quad_mesh_args([(o, np.array([xmax - xmin + 2, 0, 0]), np.array([0, ymax - ymin + 2, 0]), 1.0)])
-        vs = p.createVisualShape(p.GEOM_MESH, physicsClientId=cid, **args)
-        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
+        return [(o, np.array([xmax - xmin + 2, 0, 0]), np.array([0, ymax - ymin + 2, 0]), 1.0)]
 
-    def _make_wall_overlay(self) -> int | None:
-        p, cid = self.p, self.cid
+    def _wall_quads(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
         quads = []
         for wall in self.sim.world.walls:
             c, s = math.cos(wall.yaw), math.sin(wall.yaw)
@@ -138,26 +147,33 @@ class Randomizer:
                         quads.append((base + u, -u, v, 1.0))
                     else:
                         quads.append((base, u, v, 1.0))
+        return quads
+
+    def _overlay(self, old: int | None, quads: list, kinds: Sequence[str]) -> int | None:
+        """A new textured overlay body over ``quads`` (removing ``old``): a texture of one of ``kinds``
+        drawn now, named by the overlay's own material file. The EGL plugin numbers textures on its own,
+        so a ``textureUniqueId`` given to ``changeVisualShape`` shows the wrong one (or none) there; a
+        texture read with its mesh is right in both renderers (TinyRenderer: the same pixels)."""
+        p, cid = self.p, self.cid
+        if old is not None:
+            p.removeBody(old, physicsClientId=cid)
         if not quads:
             return None
-        vs = p.createVisualShape(p.GEOM_MESH, physicsClientId=cid, **_quad_mesh_args(quads))
-        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
-
-    def _texture(self, kinds: Sequence[str] = TEXTURE_KINDS) -> int:
         img = make_texture(str(self.rng.choice(list(kinds))), self.rng)
-        path = self.tmpdir / f"tex{self._tex_count}.png"
+        k = self._tex_count
         self._tex_count += 1
-        cv2.imwrite(str(path), img[:, :, ::-1])
-        return self.p.loadTexture(str(path), physicsClientId=self.cid)
+        cv2.imwrite(str(self.tmpdir / f"tex{k}.png"), img[:, :, ::-1])
+        (self.tmpdir / f"overlay{k}.mtl").write_text(f"newmtl m\nKd 1 1 1\nmap_Kd tex{k}.png\n")
+        obj = write_quad_obj(quads, self.tmpdir / f"overlay{k}.obj", material=f"overlay{k}.mtl")
+        vs = p.createVisualShape(p.GEOM_MESH, fileName=str(obj), physicsClientId=cid)
+        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
 
     # -- scene -------------------------------------------------------------------------------
     def randomize_scene(self) -> None:
         p, cid, rng = self.p, self.cid, self.rng
         # floor and walls: a texture (or plain colour) on the overlays
-        p.changeVisualShape(self.floor_overlay, -1, textureUniqueId=self._texture(), rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
-        if self.wall_overlay is not None:
-            kinds = ("plain", "plain", "stripes", "tiles", "marble", "carpet")
-            p.changeVisualShape(self.wall_overlay, -1, textureUniqueId=self._texture(kinds), rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        self.floor_overlay = self._overlay(self.floor_overlay, self.floor_quads, TEXTURE_KINDS)
+        self.wall_overlay = self._overlay(self.wall_overlay, self.wall_quads, ("plain", "plain", "stripes", "tiles", "marble", "carpet"))
         # object colours: jitter every part around its catalogue colour, sometimes a bold new hue
         for b, rgba in self.original_rgba.items():
             if rng.random() < 0.12:

@@ -82,8 +82,12 @@ def test_compare_runs_both_models_on_the_same_images(tmp_path, capsys) -> None:
 
     from app.bench import detector as bench
 
+    import yaml
+
     models = Path(__file__).resolve().parents[1] / "assets" / "models"
-    assert bench.previous_model(models / "detector.onnx") == models / "detector-v3.onnx"
+    float_ref = yaml.safe_load((models / "detector.yaml").read_text())["lineage"]["previous"]["file"]
+    assert float_ref != "detector.onnx" and (models / float_ref).is_file()
+    assert bench.previous_model(models / "detector.onnx") == models / float_ref
     data = _test_render_dataset(tmp_path / "data")
     p = argparse.ArgumentParser()
     bench.add_arguments(p)
@@ -91,7 +95,7 @@ def test_compare_runs_both_models_on_the_same_images(tmp_path, capsys) -> None:
     args = p.parse_args(["--data", str(data), "--compare", "--latency-images", "4", "--json"])
     assert bench.run(args) == 0
     out = json.loads(capsys.readouterr().out)
-    assert [Path(m["model"]).name for m in out["models"]] == ["detector-v3.onnx", "detector.onnx"]
+    assert [Path(m["model"]).name for m in out["models"]] == [float_ref, "detector.onnx"]
     for m in out["models"]:
         assert m["instances"] == 23 and m["map50"] > 0.8  # both find the test renders' objects
         assert set(m["latency_app_ms"]) == {"1", "2"} and m["latency_app_ms"]["2"]["n"] == 4

@@ -1,6 +1,6 @@
 """The committed model (assets/models/detector.onnx, int8, static input) and its card: it loads, finds
 the expected objects on a few small committed renders (tests/data/detector, made by make_images.py
-there), and agrees with the float model it was quantized from (assets/models/detector-v3.onnx)."""
+there), and agrees with the float model it was quantized from (the card's ``lineage.previous``)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ from app.ocslam.messages import CLASS_NAMES, Image
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "assets" / "models" / "detector.onnx"
 CARD = ROOT / "assets" / "models" / "detector.yaml"
-FLOAT = ROOT / "assets" / "models" / "detector-v3.onnx"
+#: the float model the int8 one was quantized from, as its card names it
+FLOAT = ROOT / "assets" / "models" / yaml.safe_load(CARD.read_text())["lineage"]["previous"]["file"]
 DATA = ROOT / "tests" / "data" / "detector"
 
 

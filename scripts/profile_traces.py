@@ -10,6 +10,7 @@ whether a change to the code kept the object maps identical.
     python scripts/profile_traces.py --profile 30          # + cProfile, top 30 functions by own time
     python scripts/profile_traces.py --set consciousness.island_threshold_m=0.2
     python scripts/profile_traces.py --detector oracle --misses   # the oracle recordings, each miss and FP (dev only)
+    python scripts/profile_traces.py --model unrecorded          # YOLO recordings of the model before 2026-12-03 15:00
 """
 
 from __future__ import annotations
@@ -35,22 +36,45 @@ def fingerprint(objs) -> str:
     return h.hexdigest()[:12]
 
 
-def recording_detector(trace: Path) -> str:
-    """The detector a cached recording was made with (its ``recording.json``), ``"?"`` if unknown."""
+def recording_meta(trace: Path) -> dict:
+    """The ``recording.json`` of a cached trace's recording (``{}`` if unreadable)."""
     import json
 
     try:
-        return str(json.loads((trace.parent / "recording.json").read_text()).get("detector", "?"))
+        return dict(json.loads((trace.parent / "recording.json").read_text()))
     except (OSError, ValueError):
-        return "?"
+        return {}
 
 
-def suite_traces(suite: str, detector: str = "yolo") -> list[Path]:
+def recording_detector(trace: Path) -> str:
+    """The detector a cached recording was made with (its ``recording.json``), ``"?"`` if unknown."""
+    return str(recording_meta(trace).get("detector", "?"))
+
+
+def model_matches(trace: Path, model: str) -> bool:
+    """Whether a YOLO recording was made with ``model``: ``any``; ``current`` (the config's model file, by
+    content); ``unrecorded`` (recordings from before the model's hash was written down); or a sha256 prefix."""
+    meta = recording_meta(trace)
+    if model == "any" or meta.get("detector") != "yolo":
+        return True
+    sha = meta.get("detector_model_sha256")
+    if model == "unrecorded":
+        return sha is None
+    if model == "current":
+        from app.config import Config
+        from app.sweep.suite import detector_model_sha256
+
+        return sha is not None and sha == detector_model_sha256(Config().to_dict())
+    return sha is not None and str(sha).startswith(model)
+
+
+def suite_traces(suite: str, detector: str = "yolo", model: str = "current") -> list[Path]:
     """The cached traces (``runs/sweep-cache/<world>-<key>/trace-*.pkl``) of a zoo half, or all of them,
-    recorded with ``detector`` (``any``: every recording)."""
+    recorded with ``detector`` (``any``: every recording) and, for YOLO, ``model`` (:func:`model_matches`)."""
     files = sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
     if detector != "any":
         files = [f for f in files if recording_detector(f) == detector]
+    files = [f for f in files if model_matches(f, model)]
     if suite == "all":
         return files
     from app.bench.objects import zoo_split
@@ -85,11 +109,14 @@ def main() -> int:
                     help="which cached traces by default: the zoo's dev half (default), its test half, or all")
     ap.add_argument("--detector", choices=("yolo", "oracle", "any"), default="yolo",
                     help="the recordings' detector (default yolo)")
+    ap.add_argument("--model", default="current", metavar="current|unrecorded|any|SHA",
+                    help="YOLO recordings made with the app's current model (default, by content), before the model "
+                         "was written down, any, or the model whose sha256 starts so")
     ap.add_argument("--misses", action="store_true", help="list each world's misses and false positives")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="print the top N functions (own time)")
     a = ap.parse_args()
-    files = [Path(p) for p in a.traces] or suite_traces(a.suite, a.detector)
+    files = [Path(p) for p in a.traces] or suite_traces(a.suite, a.detector, a.model)
     if not files:
         print("no traces: run `ocslam sweep assets/sweeps/six-constants.yaml --trials 1` first", file=sys.stderr)
         return 2

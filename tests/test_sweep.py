@@ -152,3 +152,27 @@ def test_asha_stops_a_trial_that_finds_nothing_after_its_first_world(recording, 
     assert best_row(list(rows.values()))["trial_id"] == good["trial_id"]
     _csv, md = write_table(spec, list(rows.values()), out)
     assert "1 stopped early by ASHA" in md.read_text(encoding="utf-8")
+
+
+def test_a_recording_key_names_the_detector_models_content(tmp_path):
+    """A retrained model at the same path is another recording (its boxes differ); the oracle's
+    recordings do not depend on the model file."""
+    from app.sweep.suite import World, recording_key
+
+    model = tmp_path / "det.onnx"
+    model.write_bytes(b"one model")
+    w = World("w", seed=3, family="corridor")
+    yolo = Config()
+    yolo.set("detector.kind", "yolo")
+    yolo.set("detector.model_path", str(model))
+    k1 = recording_key(yolo.to_dict(), w, 0.2, 100.0)
+    assert recording_key(yolo.to_dict(), w, 0.2, 100.0) == k1
+    model.write_bytes(b"another model, retrained")
+    k2 = recording_key(yolo.to_dict(), w, 0.2, 100.0)
+    assert k2 != k1
+    oracle = Config()
+    oracle.set("detector.kind", "oracle")
+    oracle.set("detector.model_path", str(model))
+    k3 = recording_key(oracle.to_dict(), w, 0.2, 100.0)
+    model.write_bytes(b"a third")
+    assert recording_key(oracle.to_dict(), w, 0.2, 100.0) == k3

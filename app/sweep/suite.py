@@ -12,7 +12,8 @@ recorded boxes with confidence ``≥ t`` (:func:`app.sweep.trace.filter_detectio
 
 Recordings live in a cache folder, one per world and *recording key* (a hash of everything that changes
 what the sensors and the detector produce: the config without its consciousness, UI, server and replay
-sections, the floor, the route and the duration); a recording with the same key is reused.
+sections, the detector model's content (its sha256: a retrained model at the same path is another
+recording), the floor, the route and the duration); a recording with the same key is reused.
 """
 
 from __future__ import annotations
@@ -101,12 +102,38 @@ def load_world_of(w: World):
     return generate(w.family or "rooms", int(w.seed or 0))
 
 
+_MODEL_SHA: dict[tuple[str, int, int], str] = {}
+
+
+def detector_model_sha256(cfg_dict: dict[str, Any]) -> str | None:
+    """sha256 of the ONNX model a config's YOLO detector loads (``None`` for other detectors or a model
+    that is not there: the recording will say why); cached by path, size and modification time."""
+    det = cfg_dict.get("detector") or {}
+    if str(det.get("kind", "yolo")) != "yolo":
+        return None
+    from app.config import resolve_path
+
+    path = Path(resolve_path(str(det.get("model_path") or "assets/models/detector.onnx")))
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    key = (str(path), st.st_size, st.st_mtime_ns)
+    if key not in _MODEL_SHA:
+        _MODEL_SHA[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return _MODEL_SHA[key]
+
+
 def recording_key(cfg_dict: dict[str, Any], w: World, floor: float, duration: float) -> str:
     """12 hex digits naming what a recording of ``w`` depends on (see the module docstring)."""
     d = {k: v for k, v in cfg_dict.items() if k not in NOT_RECORDED}
     d = json.loads(json.dumps(d, default=str))
     d.setdefault("detector", {})["confidence"] = round(float(floor), 6)
-    blob = json.dumps({"cfg": d, "world": w.job(), "duration": float(duration), "v": 1}, sort_keys=True)
+    job: dict[str, Any] = {"cfg": d, "world": w.job(), "duration": float(duration), "v": 1}
+    sha = detector_model_sha256(cfg_dict)
+    if sha is not None:
+        job["model"] = sha
+    blob = json.dumps(job, sort_keys=True)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
 
 
@@ -166,6 +193,7 @@ def record_world(cfg_dict: dict[str, Any], w: World, folder: str | Path, floor: 
     finally:
         pipe.close()
     meta = {"world": w.job(), "route": route, "detector": cfg.detector.kind, "floor": float(floor),
+            "detector_model_sha256": detector_model_sha256(cfg_dict),
             "duration": float(duration), "sim_time_s": round(sim_time, 2), "route_done": route_done,
             "wall_s": round(time.perf_counter() - t0, 1), "live_at_floor": {k: live.get(k) for k in
                                                                                ("precision_strict", "recall", "f1")},

@@ -80,9 +80,9 @@ def test_compare_runs_both_models_on_the_same_images(tmp_path, capsys) -> None:
     import json
     from pathlib import Path
 
-    from app.bench import detector as bench
-
     import yaml
+
+    from app.bench import detector as bench
 
     models = Path(__file__).resolve().parents[1] / "assets" / "models"
     float_ref = yaml.safe_load((models / "detector.yaml").read_text())["lineage"]["previous"]["file"]

@@ -14,7 +14,13 @@ schedule, epoch counter) is copied to --checkpoint (default assets/models/detect
     ocslam train-detector --resume [--epochs TOTAL] [--hours H]
 
 continues that same run; --hours stops it cleanly at the end of an epoch (the schedule is the run's,
-not refitted to the budget).
+not refitted to the budget). --data may be repeated (the union of datasets), and a run may be resumed on
+other data: its weights, optimizer and schedule go on, its best-epoch tracking starts again:
+
+    ocslam dataset --worlds 120 --per-world 45 --seed 2 --no-apartment --val-fraction 0.1 --out datasets/sim2-families
+    ocslam train-detector --resume --data datasets/sim --data datasets/sim2-families --hours 1.6
+
+A new run that refines a trained model takes --lr0 (low), --warmup-epochs 0 and --optimizer.
 
 A committed float ONNX model (whose PyTorch checkpoint was not kept) can be trained further: its weights
 are converted into an ultralytics checkpoint under the run folder (app.training.onnx_init; same outputs)

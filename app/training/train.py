@@ -341,6 +341,18 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
     if not best_pt.exists():
         best_pt = save_dir / "weights" / "last.pt"
     rows, best_row = _metrics_from_csv(save_dir / "results.csv")
+    targs = getattr(trainer, "args", None)
+    try:  # the exported weights' own epoch: the last row with their validation figures (a run resumed on
+        # other data has rows of two validation sets, so the best row of the file is not theirs)
+        import torch as _torch
+
+        tm = (_torch.load(str(best_pt), map_location="cpu", weights_only=False) or {}).get("train_metrics") or {}
+        key = "metrics/mAP50-95(B)"
+        mine = [r for r in rows if key in tm and abs(r.get(key, -1.0) - float(tm[key])) < 5e-6]
+        if mine:
+            best_row = mine[-1]
+    except Exception:  # noqa: BLE001 - the card falls back to the file's best row
+        pass
 
     # Final validation of the best weights (ultralytics also does this at the end of train()).
     final = getattr(trainer, "metrics", None) or {}
@@ -397,10 +409,12 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "best_epoch": int(best_row["epoch"]) if best_row else None,
             "imgsz": opts.imgsz,
             "batch": opts.batch,
-            "patience": opts.patience,
+            "patience": int(getattr(targs, "patience", opts.patience) or opts.patience),
             "overrides": dict(opts.extra) or None,
             "time_budget_h": opts.hours,
-            "initialised_from": str(opts.init_weights) if opts.init_weights else "random (from the model yaml)",
+            "initialised_from": str(opts.init_weights) if opts.init_weights
+            else (f"{targs.pretrained} (the run's start; resumed)" if opts.resume and isinstance(getattr(targs, "pretrained", None), str)
+                  else "random (from the model yaml)"),
             "training_time_h": round(train_s / 3600.0, 3),
             "device": f"cpu ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)",
             "torch": str(torch.__version__),

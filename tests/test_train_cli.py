@@ -39,7 +39,7 @@ def test_combine_datasets_lists_both_folders_and_lineages(tmp_path: Path) -> Non
     o = d["ocslam"]
     assert o["images"] == {"train": 40, "val": 6}
     assert o["train_worlds"] == ["w1a", "w2a"] and o["val_worlds"] == ["w1b", "w2b"]
-    assert o["command"] == "ocslam dataset --seed 1 + ocslam dataset --seed 2"
+    assert o["command"] == "ocslam dataset --seed 1 + ocslam dataset --seed 2" and o["seed"] == [1, 2]
     assert [p["seed"] for p in o["datasets"]] == [1, 2]
 
 

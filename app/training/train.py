@@ -193,6 +193,7 @@ def combine_datasets(datasets: list[Path], out_yaml: Path) -> Path:
         "names": dict(enumerate(CLASS_NAMES)),
         "ocslam": {
             "command": " + ".join(str(p["command"]) for p in parts),
+            "seed": [p.get("seed") for p in parts],
             "images": images,
             "train_worlds": [w for p in parts for w in (p.get("train_worlds") or [])],
             "val_worlds": [w for p in parts for w in (p.get("val_worlds") or [])],

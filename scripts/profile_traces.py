@@ -51,7 +51,7 @@ def recording_detector(trace: Path) -> str:
     return str(recording_meta(trace).get("detector", "?"))
 
 
-def model_matches(trace: Path, model: str) -> bool:
+def model_matches(trace: Path, model: str, current_sha: str | None = None) -> bool:
     """Whether a YOLO recording was made with ``model``: ``any``; ``current`` (the config's model file, by
     content); ``unrecorded`` (recordings from before the model's hash was written down); or a sha256 prefix."""
     meta = recording_meta(trace)
@@ -61,10 +61,7 @@ def model_matches(trace: Path, model: str) -> bool:
     if model == "unrecorded":
         return sha is None
     if model == "current":
-        from app.config import Config
-        from app.sweep.suite import detector_model_sha256
-
-        return sha is not None and sha == detector_model_sha256(Config().to_dict())
+        return sha is not None and sha == current_sha
     return sha is not None and str(sha).startswith(model)
 
 
@@ -74,7 +71,13 @@ def suite_traces(suite: str, detector: str = "yolo", model: str = "current") -> 
     files = sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
     if detector != "any":
         files = [f for f in files if recording_detector(f) == detector]
-    files = [f for f in files if model_matches(f, model)]
+    current = None
+    if model == "current":  # the app's model, by content, read once
+        from app.config import Config
+        from app.sweep.suite import detector_model_sha256
+
+        current = detector_model_sha256(Config().to_dict())
+    files = [f for f in files if model_matches(f, model, current)]
     if suite == "all":
         return files
     from app.bench.objects import zoo_split

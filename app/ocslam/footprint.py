@@ -315,7 +315,7 @@ def ray_centre(ev: ObjectEvidence) -> tuple[FloatArray, float] | None:
 
 def _ray_consistent(ev: ObjectEvidence, pts: FloatArray) -> tuple[NDArray[np.bool_] | None, FloatArray | None]:
     """``(keep, centre)``: where the rays fix the centre to ``ev.ray_centre_sigma`` (m), the voxels of
-    ``pts`` ``(N, 2)`` within the object's reach of it (half its widest apparent width, 15 % more, plus
+    ``pts`` ``(N, 2)`` within the object's reach of it (half the 75th percentile of its apparent widths, 15 % more, plus
     twice σ and 5 cm; a stool's legs behind a round table are beyond it). ``(None, None)`` when the rays
     do not decide (then every voxel counts); ``keep`` all False: none of the points is the object's."""
     if ev.ray_centre_sigma <= 0.0:

@@ -345,9 +345,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
     targs = getattr(trainer, "args", None)
     try:  # the exported weights' own epoch: the last row with their validation figures (a run resumed on
         # other data has rows of two validation sets, so the best row of the file is not theirs)
-        import torch as _torch
-
-        tm = (_torch.load(str(best_pt), map_location="cpu", weights_only=False) or {}).get("train_metrics") or {}
+        tm = (torch.load(str(best_pt), map_location="cpu", weights_only=False) or {}).get("train_metrics") or {}
         key = "metrics/mAP50-95(B)"
         mine = [r for r in rows if key in tm and abs(r.get(key, -1.0) - float(tm[key])) < 5e-6]
         if mine:

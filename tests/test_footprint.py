@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from app.ocslam.classes import prior
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import estimate_footprint
+from app.ocslam.footprint_estimate import estimate_footprint
 
 
 def _face(x: float, y0: float, y1: float, n: int = 30) -> np.ndarray:

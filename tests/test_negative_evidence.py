@@ -21,7 +21,8 @@ from app.ocslam.candidate import Candidate
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import Footprint, estimate_footprint
+from app.ocslam.footprint import Footprint
+from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.messages import CLASS_INDEX, Detection, Detections
 from app.ocslam.outside import lidar_sees, seen_outside
 from app.ocslam.projection import bounding_areas

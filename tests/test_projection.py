@@ -9,14 +9,8 @@ from hypothesis import strategies as st
 
 from app.ocslam.camera import CameraModel, ground_plane_point, transform_matrix
 from app.ocslam.messages import CLASS_INDEX, CameraInfo, Detection, Detections
-from app.ocslam.projection import (
-    area_from_box,
-    assign_points,
-    bounding_areas,
-    camera_bound,
-    contest_by_range,
-    range_deviation,
-)
+from app.ocslam.point_ownership import assign_points, contest_by_range, range_deviation
+from app.ocslam.projection import area_from_box, bounding_areas, camera_bound
 from app.ocslam.seed_projection import (
     SEED_FY,
     seed_assign_points,

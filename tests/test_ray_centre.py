@@ -1,7 +1,7 @@
 """Where the bisector rays cross (issue 9): the boxes of one object seen from several directions fix its
 centre; LIDAR points beyond the object's reach of that centre belong to something else.
 
-Known answers of :func:`app.ocslam.footprint.ray_centre`, the footprint's choice of points, and a
+Known answers of :func:`app.ocslam.ray_centre.ray_centre`, the footprint's choice of points, and a
 scenario: a round pedestal table with stools pushed in on three sides, seen only from the open side,
 so that the stools stand inside the table's box in every view (the negative evidence of the box's
 outside cannot separate them); the rays still cross at the pedestal.
@@ -18,7 +18,8 @@ from test_fusion_scenarios import arc, found, make, run
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import estimate_footprint, ray_centre
+from app.ocslam.footprint_estimate import estimate_footprint
+from app.ocslam.ray_centre import ray_centre
 
 
 def _rays_at(ev: ObjectEvidence, target: np.ndarray, origins: np.ndarray, app: float, jitter: float = 0.0) -> None:

@@ -19,7 +19,8 @@ from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import Footprint, estimate_footprint, linspace, min_area_rect
+from app.ocslam.footprint import Footprint, linspace, min_area_rect
+from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.islands import Island, islands_linkage
 from app.ocslam.messages import OccupancyGrid
 from app.ocslam.projection import BoundingArea

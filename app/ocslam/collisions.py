@@ -16,7 +16,8 @@ from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import estimate_footprint, min_area_rect
+from app.ocslam.footprint import min_area_rect
+from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.projection import BoundingArea
 from app.ocslam.tracks import (
     FreeFn,

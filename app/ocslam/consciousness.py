@@ -52,15 +52,15 @@ from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import NO_KEYFRAME
-from app.ocslam.footprint import Footprint
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import close_pairs, cluster_extents
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
 from app.ocslam.outside import seen_outside
-from app.ocslam.projection import assign_points, bounding_areas, camera_bound, contest_by_range
+from app.ocslam.point_ownership import assign_points, contest_by_range
+from app.ocslam.projection import bounding_areas, camera_bound
+from app.ocslam.scan_beams import scan_beams
 from app.ocslam.se2 import Pose2
-from app.ocslam.seed import SeedConsciousness
-from app.ocslam.seed_projection import seed_camera_projection
+from app.ocslam.seed import SeedConsciousness, seed_frame_report
 from app.ocslam.track_state import tracks_from_state, tracks_state
 from app.ocslam.tracks import (
     Sighting,
@@ -237,43 +237,7 @@ class Consciousness:
         self, detections: Detections, scan: LaserScan, T_odom_base: Pose2, stamp: float, robot_moved: bool | None
     ) -> FrameReport:
         out = self._seed.update(detections, scan, T_odom_base, stamp=stamp, cfg=self.cfg, robot_moved=robot_moved)
-        rep = FrameReport(
-            stamp=stamp,
-            mode="seed",
-            frame_id="odom",
-            T_frame_scan=T_odom_base,
-            points_scan=out["points"],
-            camera_bound=seed_camera_projection().polygon,
-            areas=out["areas"],
-            islands=out["islands"],
-            rejected=out["rejected"],
-            created=out["created"],
-            updated=out["updated"],
-            removed=out["removed"],
-            new_frame=out["new_frame"],
-        )
-        for k, best in enumerate(out["chosen"]):
-            if best is None:
-                rep.chosen.append(None)
-                continue
-            isl = out["islands"][k][best]
-            det = out["areas"][k].detection
-            x0, y0, x1, y1 = isl.bbox
-            c = T_odom_base.transform_points(np.array([[(x0 + x1) / 2, (y0 + y1) / 2]]))[0]
-            rep.chosen.append(
-                Candidate(
-                    area_index=k,
-                    label=det.label,
-                    confidence=float(det.confidence),
-                    source="lidar_island",
-                    points=T_odom_base.transform_points(isl.points),
-                    footprint=Footprint(c, 0.0, x1 - x0, y1 - y0),
-                    near_range=float(np.linalg.norm(out["areas"][k].near_midpoint)),
-                    islands=[best],
-                    status="seed",
-                )
-            )
-        return rep
+        return seed_frame_report(out, T_odom_base, stamp)
 
     # ------------------------------------------------------------------------------------------
     # improved mode
@@ -339,27 +303,11 @@ class Consciousness:
         self._last_stamp = stamp
 
         # scan: valid points (for islands) and every beam (for free-space / occlusion tests)
-        ranges = np.asarray(scan.ranges, dtype=np.float64).reshape(-1)
-        angles, cos_a, sin_a = self._beam_angles(float(scan.angle_min), float(scan.angle_increment), len(ranges))
-        with np.errstate(invalid="ignore"):
-            finite = np.isfinite(ranges)
-            valid = finite & (ranges >= scan.range_min) & (ranges <= scan.range_max)
-            no_return = np.isposinf(ranges) | (finite & (ranges > scan.range_max))
-        known = valid | no_return
-        beam_b_scan = angles[known]
-        beam_r_scan = np.where(valid[known], ranges[known], np.inf)
-        r_valid = ranges[valid]
-        pts_all = np.empty((len(r_valid), 2))
-        np.multiply(r_valid, cos_a[valid], out=pts_all[:, 0])
-        np.multiply(r_valid, sin_a[valid], out=pts_all[:, 1])
-        # beams about the apex (the wedges' tip)
-        hit = np.isfinite(beam_r_scan)
-        far = np.where(hit, beam_r_scan, 1e3)
-        apex = cam.apex_scan
-        ex = far * cos_a[known] - apex[0]
-        ey = far * sin_a[known] - apex[1]
-        beam_b_apex = np.arctan2(ey, ex)
-        beam_r_apex = np.where(hit, np.hypot(ex, ey), np.inf)
+        n_beams = len(np.asarray(scan.ranges).reshape(-1))
+        angles, cos_a, sin_a = self._beam_angles(float(scan.angle_min), float(scan.angle_increment), n_beams)
+        beams = scan_beams(scan, angles, cos_a, sin_a, cam.apex_scan)
+        ranges, valid, pts_all = beams.ranges, beams.valid, beams.points
+        beam_b_scan, beam_r_scan, beam_b_apex, beam_r_apex = beams.bearing_scan, beams.range_scan, beams.bearing_apex, beams.range_apex
 
         rep = FrameReport(
             stamp=stamp,
@@ -397,7 +345,7 @@ class Consciousness:
         # Point ownership: the boxes nearest the camera choose their object first (the paper's
         # assumption 3) and the islands it takes are no longer available to the boxes behind it (a
         # chair's legs are not the table's). Without ownership every point was given to one area by
-        # its range alone (projection.assign_points).
+        # its range alone (point_ownership.assign_points).
         owned = np.zeros(len(pts_all), dtype=bool)
         box_px = np.array([a.box_px for a in areas], dtype=np.float64).reshape(-1, 4)
         for k in ownership_order(areas) if ownership else range(len(areas)):

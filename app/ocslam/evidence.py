@@ -9,7 +9,7 @@ Every observation of an object adds:
 
 All of it is stored in the object frame (``map``) tagged with the SLAM keyframe it was seen from, so a
 loop-closure correction moves every piece rigidly with its keyframe (:meth:`ObjectEvidence.transform`).
-The footprint estimated from it is :func:`app.ocslam.footprint.estimate_footprint`.
+The footprint estimated from it is :func:`app.ocslam.footprint_estimate.estimate_footprint`.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class ObjectEvidence:
         self.outside = np.zeros(0, dtype=np.int64)
         self.outside_ratio = 0.0
         #: ``consciousness.ray_centre_sigma_m`` (0: off): where the bisector rays fix the centre this well,
-        #: voxels farther from it than the object can reach do not shape it (:func:`app.ocslam.footprint.ray_centre`)
+        #: voxels farther from it than the object can reach do not shape it (:func:`app.ocslam.ray_centre.ray_centre`)
         self.ray_centre_sigma = 0.0
         self.ray_origin = np.zeros((0, 2))
         self.ray_dir = np.zeros((0, 2))
@@ -97,7 +97,7 @@ class ObjectEvidence:
         self.leg_obs = 0
         #: bumped when ``points`` is changed in place (a correction); a new ``points`` array is a change too
         self.points_revision = 0
-        #: what :func:`app.ocslam.footprint.estimate_footprint` derived from these points (its cache), and from
+        #: what :func:`app.ocslam.footprint_estimate.estimate_footprint` derived from these points (its cache), and from
         #: those of them within reach of the rays' crossing (keyed by the cached points and the chosen voxels)
         self.shape_cache: tuple | None = None
         self.ray_shape_cache: tuple | None = None
@@ -162,7 +162,7 @@ class ObjectEvidence:
         after = self.trusted()
         if (before is None and after is None) or (before is not None and after is not None and np.array_equal(before, after)):
             return False
-        self.points_revision += 1  # the shape's cache (footprint._point_shape) is stale
+        self.points_revision += 1  # the shape's cache (footprint_estimate._point_shape) is stale
         return True
 
     def trusted(self) -> NDArray[np.bool_] | None:

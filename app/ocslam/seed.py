@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from app.ocslam.candidate import Candidate, FrameReport
+from app.ocslam.footprint import Footprint
 from app.ocslam.islands import Island, islands_seed
 from app.ocslam.messages import Detections, LaserScan, TrackedObject
 from app.ocslam.se2 import Pose2
@@ -274,3 +276,45 @@ class SeedConsciousness:
         self.objects = objs
         self._next_id = int(d.get("next_id", max((o.id for o in objs), default=-1) + 1))
         self._last_pose = None
+
+
+def seed_frame_report(out: dict[str, Any], T_odom_base: Pose2, stamp: float) -> FrameReport:
+    """The :class:`~app.ocslam.candidate.FrameReport` of one :meth:`SeedConsciousness.update` result
+    ``out`` (its areas, islands and the object each area chose, in ``odom``)."""
+    rep = FrameReport(
+        stamp=stamp,
+        mode="seed",
+        frame_id="odom",
+        T_frame_scan=T_odom_base,
+        points_scan=out["points"],
+        camera_bound=seed_camera_projection().polygon,
+        areas=out["areas"],
+        islands=out["islands"],
+        rejected=out["rejected"],
+        created=out["created"],
+        updated=out["updated"],
+        removed=out["removed"],
+        new_frame=out["new_frame"],
+    )
+    for k, best in enumerate(out["chosen"]):
+        if best is None:
+            rep.chosen.append(None)
+            continue
+        isl = out["islands"][k][best]
+        det = out["areas"][k].detection
+        x0, y0, x1, y1 = isl.bbox
+        c = T_odom_base.transform_points(np.array([[(x0 + x1) / 2, (y0 + y1) / 2]]))[0]
+        rep.chosen.append(
+            Candidate(
+                area_index=k,
+                label=det.label,
+                confidence=float(det.confidence),
+                source="lidar_island",
+                points=T_odom_base.transform_points(isl.points),
+                footprint=Footprint(c, 0.0, x1 - x0, y1 - y0),
+                near_range=float(np.linalg.norm(out["areas"][k].near_midpoint)),
+                islands=[best],
+                status="seed",
+            )
+        )
+    return rep

@@ -24,7 +24,8 @@ from app.ocslam.candidate import Candidate
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import NO_KEYFRAME, ObjectEvidence
-from app.ocslam.footprint import Footprint, estimate_footprint, min_area_rect, nearest_distances
+from app.ocslam.footprint import Footprint, min_area_rect, nearest_distances
+from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.messages import OccupancyGrid, TrackedObject
 from app.ocslam.presence import initial_presence, update_presence
 from app.ocslam.se2 import Pose2

@@ -42,6 +42,7 @@ from app.loop.autonomy import Autonomy
 from app.loop.fusion import CameraFusion, FusionSnapshot
 from app.loop.metrics import RunMetrics
 from app.loop.stages import Counters, StageJobs, StageTimer
+from app.ocslam.detector import detector_score_calibration
 from app.ocslam.messages import GroundTruthObject, GroundTruthObstacle, LaserScan, Twist
 from app.ocslam.odometry import DiffDriveOdometry
 from app.ocslam.se2 import Pose2
@@ -117,6 +118,8 @@ class Pipeline(Autonomy, CameraFusion, RunMetrics):
                 log.error("detector disabled: %s", e)
                 detector = None
         self.detector = detector
+        #: the detector's box score → probability (its card's; identity for the oracle or no detector)
+        self.score_calibration = detector_score_calibration(detector)
         # the loop's own client renders only without a render process: it skips the EGL context then
         render_process = self.detector is not None and cfg.camera.async_render
         # only the primary camera rendered in the loop, on the thread that built it, uses EGL; previews
@@ -143,7 +146,7 @@ class Pipeline(Autonomy, CameraFusion, RunMetrics):
                 log.warning("camera render process unavailable (%s); rendering in the loop", e)
                 self.renderer_note = f"{self.sim.renderer_note}; in the loop (render process unavailable: {e})"
         log.info("camera renderer: %s", self.renderer_note)
-        self.consciousness = Consciousness(cfg.consciousness, self.camera_model)
+        self.consciousness = Consciousness(cfg.consciousness, self.camera_model, self.score_calibration)
 
         self.timer = StageTimer()
         self.counters = Counters()
@@ -427,7 +430,7 @@ class Pipeline(Autonomy, CameraFusion, RunMetrics):
         self.jobs.join()
         self.sim.reset()
         self.slam = Slam(self.cfg.slam, T_base_scan=self.T_base_scan)
-        self.consciousness = Consciousness(self.cfg.consciousness, self.camera_model)
+        self.consciousness = Consciousness(self.cfg.consciousness, self.camera_model, self.score_calibration)
         self.scans.clear()
         self.last_scan = None
         self.fusion = FusionSnapshot()

@@ -101,6 +101,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="end this session after this many epochs (the run's schedule is kept; continue with --resume)")
     p.add_argument("--optimize", type=Path, default=None, metavar="FLOAT_ONNX",
                    help="no training: make the static-shape int8 inference model from this float model (see --calib)")
+    p.add_argument("--score-calibration", type=Path, default=None, metavar="DATASET",
+                   help="no training: fit --app-model's score → probability map (Platt scaling) on this `ocslam "
+                        "dataset`'s val renders (worlds it never saw, rendered as the app renders) and write it "
+                        "into the model's card")
     p.add_argument("--calib", type=Path, default=Path("datasets/calib"),
                    help="with --optimize: `ocslam dataset` folder of calibration renders (training worlds)")
     p.add_argument("--calib-images", type=int, default=120, help="with --optimize: calibration images used")
@@ -117,6 +121,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.optimize is not None:
         return _optimize(args)
+    if args.score_calibration is not None:
+        return _score_calibration(args)
     if args.init_onnx is not None:
         clash = "--init-weights" if args.init_weights is not None else "--resume" if args.resume else None
         if clash:
@@ -297,4 +303,35 @@ def _optimize(args: argparse.Namespace) -> int:
     except (FileNotFoundError, ValueError) as e:
         print(f"ocslam: error: {e}", file=sys.stderr)
         return 2
+    return 0
+
+
+def _score_calibration(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from app.config import Config
+    from app.ocslam.detector import Detector, DetectorError
+    from app.training.score_calibration import fit_score_calibration, write_card_calibration
+
+    data = args.score_calibration
+    if not (data / "data.yaml").is_file():
+        print(f"ocslam: error: --score-calibration: no dataset (data.yaml) at {data}", file=sys.stderr)
+        return 2
+    cfg = Config().detector
+    cfg.calibration = "off"
+    try:
+        det = Detector(cfg, args.app_model)
+        entry = fit_score_calibration(det, data)
+        command = "ocslam train-detector --score-calibration " + shlex.quote(str(data))
+        if args.app_model != Path("assets/models/detector.onnx"):
+            command += " --app-model " + shlex.quote(str(args.app_model))
+        card = write_card_calibration(args.app_model, entry, command)
+    except (DetectorError, ValueError, OSError) as e:
+        print(f"ocslam: error: {e}", file=sys.stderr)
+        return 2
+    fo = entry["fitted_on"]
+    print(f"score calibration of {args.app_model.name}: p = σ({entry['slope']:.3f}·logit(s) + {entry['offset']:.3f}) "
+          f"from {fo['boxes']} boxes ({fo['right']} right) on {fo['images']} renders; ECE {entry['ece_before']:.3f} → "
+          f"{entry['ece_after']:.3f}; score for p = 0.8: {entry['score_for_probability']['0.80']:.3f}; wrote {card}")
     return 0

@@ -280,6 +280,12 @@ class DetectorConfig:
     verify_hash: bool = param(
         True, help="refuse a model whose sha256 differs from its model card (assets/models/*.yaml)"
     )
+    calibration: str = param(
+        "card",
+        choices=("card", "off"),
+        help="card: the soft decision reads each box's score as the probability its model card's Platt scaling "
+        "gives (fitted on renders of unseen worlds; improved mode); off: the raw score (the paper)",
+    )
     spin: bool = param(False, help="onnxruntime intra-op threads spin-wait between runs (costs CPU the loop needs)")
     denormal_as_zero: bool = param(False, help="onnxruntime flushes float denormals to zero")
     oracle_min_pixels: int = param(60, min=1, max=100000, help="oracle: minimum visible pixels for a box")

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -47,6 +48,7 @@ from shapely.geometry import Polygon
 
 from app.ocslam.area_candidate import area_candidate
 from app.ocslam.association import associate, bearing_match, sighting
+from app.ocslam.calibration import ScoreCalibration
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
@@ -85,9 +87,15 @@ _Sighting = Sighting
 class Consciousness:
     """The object map. ``cfg`` is read live on every :meth:`update`."""
 
-    def __init__(self, cfg: ConsciousnessConfig, camera: CameraModel) -> None:
+    def __init__(
+        self, cfg: ConsciousnessConfig, camera: CameraModel, score_calibration: ScoreCalibration | None = None
+    ) -> None:
         self.cfg = cfg
         self.camera = camera
+        #: improved mode: the detector's box score → the probability that the box is right (its model
+        #: card's Platt scaling, :mod:`app.ocslam.calibration`); the soft decision reads that probability
+        #: as ``Y_c``. Seed mode always reads the raw score, as the paper does. Identity: none.
+        self.score_calibration = score_calibration if score_calibration is not None else ScoreCalibration()
         self._seed = SeedConsciousness()
         self._tracks: list[Track] = []
         self._next_id = 0
@@ -264,6 +272,10 @@ class Consciousness:
                 out.append(b)
             else:
                 rep.reject("bad_box")
+        cal = self.score_calibration
+        if not cal.is_identity and out:
+            p = cal.probabilities([b.confidence for b in out])
+            out = [replace(b, confidence=float(pk)) for b, pk in zip(out, p)]
         return out
 
     def _update_improved(

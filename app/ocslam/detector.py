@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from app.ocslam.calibration import ScoreCalibration
 from app.ocslam.config import DetectorConfig
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES, Detection, Detections, Image
 
@@ -272,6 +273,42 @@ def verify_model_hash(model: Path) -> str | None:
     return actual
 
 
+def model_score_calibration(model: Path) -> ScoreCalibration | None:
+    """The Platt scaling of ``model``'s scores from its card (its entry's ``score_calibration``), or None
+    when no card describes the file, the entry has none, or the file's sha256 is not the card's (a
+    calibration fitted for other weights). Raises :class:`DetectorError` on a malformed entry."""
+    found = find_model_card(Path(model))
+    if found is None:
+        return None
+    card_path, entry = found
+    if "score_calibration" not in entry:
+        return None
+    if str(entry.get("sha256") or "").strip().lower() != file_sha256(Path(model)):
+        return None
+    try:
+        return ScoreCalibration.from_dict(entry["score_calibration"])
+    except ValueError as e:
+        raise DetectorError(f"model card {card_path}: {model.name}: {e}") from None
+
+
+def detector_score_calibration(detector: object) -> ScoreCalibration:
+    """The score calibration the object map applies to ``detector``'s boxes: a YOLO :class:`Detector`'s
+    (its card's), the identity for the oracle, a custom detector or none."""
+    cal = getattr(detector, "score_calibration", None)
+    return cal if isinstance(cal, ScoreCalibration) else ScoreCalibration()
+
+
+def score_calibration_for(cfg: DetectorConfig) -> ScoreCalibration:
+    """The score → probability map the object map uses with ``cfg``'s detector: the model card's for
+    ``kind: yolo`` with ``calibration: card``, else the identity (the oracle's and the paper's scores)."""
+    if cfg.kind != "yolo" or cfg.calibration != "card":
+        return ScoreCalibration()
+    path = _resolve(cfg.model_path)
+    if not path.is_file():
+        return ScoreCalibration()
+    return model_score_calibration(path) or ScoreCalibration()
+
+
 def session_config_entries(cfg: DetectorConfig) -> dict[str, str]:
     """onnxruntime session config entries from the config: intra-op spin-waiting (``cfg.spin``; off by
     default: on the app's 2 shared cores a spinning thread takes the CPU the loop needs, measured in
@@ -323,6 +360,11 @@ class Detector:
             raise DetectorError(f"detector model {path} is empty. Make one with: {MAKE_MODEL_COMMAND}")
         #: sha256 checked against the model card (None: not checked, or no card describes the file)
         self.sha256: str | None = verify_model_hash(path) if getattr(cfg, "verify_hash", True) else None
+        #: the card's score → probability map (identity: ``calibration: off``, or the card has none);
+        #: :class:`~app.ocslam.consciousness.Consciousness` applies it, the boxes keep the raw score
+        self.score_calibration: ScoreCalibration = (
+            (model_score_calibration(path) or ScoreCalibration()) if cfg.calibration == "card" else ScoreCalibration()
+        )
         import onnxruntime as ort
 
         opts = ort.SessionOptions()

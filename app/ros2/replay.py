@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from app.config import Config
+from app.ocslam.detector import detector_score_calibration, score_calibration_for
 from app.ocslam.messages import (
     Detections,
     GroundTruthObject,
@@ -191,7 +192,11 @@ class ReplayCore:
     def _fresh_state(self) -> _State:
         s = _State()
         s.slam = self._Slam(self.cfg.slam, T_base_scan=self.T_base_scan)
-        s.consciousness = self._Consciousness(self.cfg.consciousness, self.camera_model)
+        # the detector run here calibrates its own scores; recorded /yolo_boxes are read as the configured
+        # model's (an app recording's; detector.calibration: off for boxes of another detector)
+        cal = (detector_score_calibration(self.detector) if self.detector is not None and not self.reuse_detections
+               else score_calibration_for(self.cfg.detector))
+        s.consciousness = self._Consciousness(self.cfg.consciousness, self.camera_model, cal)
         return s
 
     # -- frames ------------------------------------------------------------------------------------

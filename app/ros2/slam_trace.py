@@ -290,13 +290,17 @@ class TraceReplay:
 
     def __init__(self, trace: SlamTrace, cfg: Any) -> None:
         from app.ocslam.consciousness import Consciousness
+        from app.ocslam.detector import score_calibration_for
 
         why = trace_can_run(trace, cfg)
         if why is not None:
             raise ValueError(f"SLAM trace: {why}")
         self.trace, self.cfg = trace, cfg
         self.camera_model = trace.camera_model
-        self.state = _TraceState(Consciousness(cfg.consciousness, trace.camera_model), trace.odom_log)
+        # the boxes (recorded /yolo_boxes, or the replay's own detector's) are read as the configured
+        # model's, as ReplayCore reads them (detector.calibration: off for boxes of another detector)
+        cal = score_calibration_for(cfg.detector)
+        self.state = _TraceState(Consciousness(cfg.consciousness, trace.camera_model, cal), trace.odom_log)
         self.slam = _FrozenSlam(trace)
         self.warnings = list(trace.summary.get("warnings", []))
         self.t_start, self.t_end = trace.t_start, trace.t_end

@@ -44,7 +44,7 @@ SCHEDULERS = ("fifo", "asha")
 METRICS = ("f1", "precision_at_recall")
 #: the fields a trial can change while replaying the recordings with the recorded boxes
 REPLAYABLE_SECTIONS = ("consciousness",)
-REPLAYABLE_FIELDS = ("detector.confidence",)
+REPLAYABLE_FIELDS = ("detector.confidence", "detector.calibration")
 #: the paper's six constants (docs/tuning.md)
 SIX_CONSTANTS = ("consciousness.tracking_threshold_m", "consciousness.island_threshold_m",
                  "consciousness.presence_threshold", "consciousness.rolling_average_weight",

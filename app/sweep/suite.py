@@ -129,6 +129,7 @@ def recording_key(cfg_dict: dict[str, Any], w: World, floor: float, duration: fl
     d = {k: v for k, v in cfg_dict.items() if k not in NOT_RECORDED}
     d = json.loads(json.dumps(d, default=str))
     d.setdefault("detector", {})["confidence"] = round(float(floor), 6)
+    d["detector"].pop("calibration", None)  # how the object map reads the scores, not which boxes were recorded
     job: dict[str, Any] = {"cfg": d, "world": w.job(), "duration": float(duration), "v": 1}
     sha = detector_model_sha256(cfg_dict)
     if sha is not None:

@@ -175,11 +175,13 @@ def replay_trace(trace: Trace, cfg: Any) -> list:
     import logging
 
     from app.ocslam.consciousness import Consciousness
+    from app.ocslam.detector import score_calibration_for
 
     why = trace_can_run(trace, cfg)
     if why is not None:
         raise ValueError(f"{trace.name}: {why}")
-    cons = Consciousness(cfg.consciousness, trace.camera_model)
+    # the recordings of a YOLO suite are keyed by the model's hash: its card's calibration is theirs
+    cons = Consciousness(cfg.consciousness, trace.camera_model, score_calibration_for(cfg.detector))
     conf = float(cfg.detector.confidence)
     corner = bool(cfg.consciousness.corner_check)
     last: tuple[CompactGrid, OccupancyGrid] | None = None  # the grid changes less often than the frames

@@ -468,9 +468,10 @@ def test_duck_is_missed_in_seed_mode():
 # -- ghost decay --------------------------------------------------------------------------------------------
 
 
-def _seen_then_missed(occluder: bool, missed: int = 14):
+def _seen_then_missed(occluder: bool, missed: int = 14, presence_evidence: bool = False):
+    """The ghost decay alone by default (the presence evidence caps the published presence too: below)."""
     ball = Cylinder(1.8, 0.0, 0.11, 0.0, 0.22)
-    c = make(decay_rate_per_s=0.15)
+    c = make(decay_rate_per_s=0.15, presence_evidence=presence_evidence)
     drive(c, [ball], [("ball", ball)], line(6))
     (o,) = c.objects
     p0 = o.presence
@@ -489,6 +490,38 @@ def test_ghost_decays_in_view():
     (o,) = c.objects
     assert o.presence == pytest.approx(p0 - 0.15 * 0.2 * (14 - 6), abs=1e-6)
     assert c.visible_objects() == []
+
+
+def test_clear_misses_weigh_against_the_published_presence():
+    """Presence evidence: boxed in 6 frames, then in clear view and missed. The soft decision's presence
+    stays (a few misses: the ghost decay waits), but the published one is P(there | 6 boxed, m missed)
+    with q1 = 0.9, q0 = 0.5: one miss leaves it shown (0.87), two hide it (0.58), six (0.002)."""
+    from app.ocslam.presence import evidence_presence
+
+    for missed, shown in ((0, True), (1, True), (2, False), (6, False)):
+        p0, c = _seen_then_missed(occluder=False, missed=missed, presence_evidence=True)
+        (t,) = c._tracks
+        (o,) = c.objects
+        assert t.presence == pytest.approx(p0 if missed else t.presence)
+        assert (t.detections, t.misses) == (6, missed)
+        assert o.presence == pytest.approx(min(t.presence, evidence_presence(6, missed, 0.9, 0.5)))
+        assert (c.visible_objects() != []) is shown
+        c.cfg.presence_evidence = False  # live
+        assert c.objects[0].presence == pytest.approx(t.presence)
+    # an occluded object is not missed: its presence stands
+    p0, c = _seen_then_missed(occluder=True, presence_evidence=True)
+    assert c.objects[0].presence == pytest.approx(p0) and c._tracks[0].misses == 0
+
+
+def test_evidence_presence_known_answers():
+    from app.ocslam.presence import evidence_presence
+
+    # odds ×(0.9/0.5) per boxed frame, ×(0.1/0.5) per clear miss, from 1:1
+    assert evidence_presence(5, 0, 0.9, 0.5) == pytest.approx(1 / (1 + (0.5 / 0.9) ** 5))
+    assert evidence_presence(1, 1, 0.9, 0.5) == pytest.approx(1 / (1 + (0.5 / 0.9) * 5))
+    assert evidence_presence(0, 0, 0.9, 0.5) == pytest.approx(0.5)
+    assert evidence_presence(500, 0, 0.9, 0.5) == pytest.approx(1.0) and evidence_presence(0, 500, 0.9, 0.5) < 1e-20
+    assert evidence_presence(3, 9, 0.5, 0.9) == 1.0  # q0 ≥ q1: no evidence model, nothing capped
 
 
 def test_occluded_object_keeps_its_presence():

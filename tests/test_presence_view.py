@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from synthetic_scene import default_camera
@@ -61,3 +64,60 @@ def _reference(c, h, T_map_base: Pose2, max_range: float) -> bool:
     W, H = CAM.info.width, CAM.info.height
     u, v = uv[0]
     return bool(0.08 * W <= u <= 0.92 * W and 0 <= v <= H and np.hypot(*(cb - CAM.center_base[:2])) <= max_range)
+
+
+# -- how much of an object the image holds (clear misses follow the detector's labelling rule) ------------
+
+
+def _square(x: float, y: float, half: float) -> np.ndarray:
+    return np.array([[x - half, y - half], [x + half, y - half], [x + half, y + half], [x - half, y + half]])
+
+
+def test_in_frame_fractions_known_answers():
+    from app.ocslam.presence import in_frame_fractions
+
+    cam = default_camera()
+    hfov = 2.0 * math.atan(cam.info.width / (2.0 * cam.info.fx)) if hasattr(cam.info, "fx") else 1.04
+    edge = 0.5 * hfov  # a thin object whose centre column is the image's left edge
+    corners = np.stack([
+        _square(2.0, 0.0, 0.05),                                          # small, straight ahead
+        _square(2.0 * math.cos(edge), 2.0 * math.sin(edge), 0.02),        # half out at the left edge
+        _square(-2.0, 0.0, 0.1),                                          # behind the robot
+        _square(0.0, 0.0, 1.0),                                           # the robot inside it
+        _square(3.0, 5.0, 0.1),                                           # far out to the left
+    ])
+    f = in_frame_fractions(corners, np.array([0.3, 0.3, 0.3, 0.3, 0.3]), Pose2(), cam)
+    assert f[0] == pytest.approx(1.0)
+    assert 0.35 < f[1] < 0.65
+    assert f[2] == 0.0 and f[3] == 0.0 and f[4] == 0.0
+    # a tall object seen close: its top leaves the frame, less than half of its box is inside
+    tall = in_frame_fractions(_square(1.0, 0.0, 0.05)[None], np.array([2.5]), Pose2(), cam)[0]
+    assert tall < 0.5
+    assert in_frame_fractions(np.zeros((0, 4, 2)), np.zeros(0), Pose2(), cam).shape == (0,)
+
+
+def test_a_table_filling_the_frame_is_not_a_clear_miss():
+    """A 2 m table 0.6 m ahead fills more than the frame: a frame without its box is not a miss (the detector's
+    labels leave out objects less than half in the frame); with the centre test alone (0) it is."""
+    from synthetic_scene import detection, detections, raycast, table
+
+    from app.ocslam.config import ConsciousnessConfig
+    from app.ocslam.consciousness import Consciousness
+
+    cam = default_camera()
+    legs, top = table(2.9, 0.0, length=1.0, width=2.0)
+    counts = {}
+    for share in (0.5, 0.0):
+        cfg = ConsciousnessConfig()
+        cfg.clear_view_in_frame = share
+        c = Consciousness(cfg, cam)
+        for i in range(6):  # boxed from 2.9–2.7 m, the whole table in view
+            T = Pose2(0.04 * i, 0.0, 0.0)
+            c.update(detections([detection("table", legs + [top], T, cam, 0.9)], cam), raycast(legs + [top], T, cam), T,
+                     stamp=0.2 * i)
+        (t,) = c._tracks
+        for i in range(5):  # then 0.6 m from it, no box
+            T = Pose2(1.8, 0.0, 0.0)
+            c.update(detections([], cam), raycast(legs + [top], T, cam), T, stamp=1.2 + 0.2 * i)
+        counts[share] = t.misses
+    assert counts[0.5] == 0 and counts[0.0] == 5

@@ -341,6 +341,29 @@ class ConsciousnessConfig:
     corner_check: bool = param(True, help="improved: reject islands inconsistent with the box (corner problem)", live=True)
     ground_plane: bool = param(True, help="improved: place objects with no island by ground-plane ranging", live=True)
     ghost_decay: bool = param(True, help="improved: decay presence of objects in view but not detected", live=True)
+    clear_view_in_frame: float = param(
+        0.5, min=0.0, max=1.0, step=0.05,
+        help="improved: a frame without a box counts as a miss only when this share of the object's outline is "
+        "inside the image (the detector's labels leave out objects less than half in the frame; 0: its centre alone)",
+        live=True,
+    )
+    presence_evidence: bool = param(
+        True,
+        help="improved: the published presence is at most P(object there | frames that boxed it, frames in clear view "
+        "that did not), from detection_rate and false_detection_rate",
+        live=True,
+    )
+    detection_rate: float = param(
+        0.9, min=0.01, max=0.99, step=0.01,
+        help="improved, presence evidence: how often the detector boxes an object that is there, in clear view",
+        live=True,
+    )
+    false_detection_rate: float = param(
+        0.5, min=0.01, max=0.99, step=0.01,
+        help="improved, presence evidence: how often it boxes that class again where it fired without an object "
+        "(clutter taken for an object)",
+        live=True,
+    )
     sync_tolerance_s: float = param(0.1, min=0.0, max=2.0, unit="s", help="improved: max image/scan stamp gap")
     range_tolerance: float = param(
         0.25, min=0.0, max=2.0, step=0.01, help="improved: relative slack of the near range given by the box's bottom edge", live=True

@@ -125,7 +125,7 @@ class Consciousness:
         """Every tracked object (any presence), in the objects' frame (``map``; ``odom`` in seed mode)."""
         if self._mode == "seed":
             return self._seed.tracked_objects("odom")
-        return [export_track(t, self._kf_poses) for t in self._tracks if t.footprint is not None]
+        return [export_track(t, self._kf_poses, self.cfg) for t in self._tracks if t.footprint is not None]
 
     def visible_objects(self) -> list[TrackedObject]:
         """Objects with presence ≥ ``presence_threshold`` (the published map)."""

@@ -1,7 +1,8 @@
 """Ghost decay (improved mode): objects in clear view that no box explains lose presence.
 
-A frame is a *clear miss* for an object when its centre projects inside the image, lies within
-``decay_max_range_m``, no box of its class covers its bearing, and the LIDAR does not see something in
+A frame is a *clear miss* for an object when its centre projects inside the image, at least
+``clear_view_in_frame`` of its outline's image box is inside the image (the detector's labelling rule),
+it lies within ``decay_max_range_m``, no box of its class covers its bearing, and the LIDAR does not see something in
 front of it. An object decays only once its clear misses outnumber its detections.
 """
 
@@ -15,7 +16,7 @@ from numpy.typing import NDArray
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import FrameReport
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.presence import centers_in_camera_view, decay_presence, occluded_by_scan
+from app.ocslam.presence import centers_in_camera_view, decay_presence, in_frame_fractions, occluded_by_scan
 from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track
@@ -49,6 +50,12 @@ def decay_tracks(
         centers = np.array([t.footprint.center for t in cand if t.footprint is not None], dtype=np.float64).reshape(-1, 2)
         heights = np.array([t.prior.height[1] for t in cand], dtype=np.float64)
         in_view = centers_in_camera_view(centers, heights, T_base_map, cam, float(cfg.decay_max_range_m))
+        frame_share = float(cfg.clear_view_in_frame)
+        if frame_share > 0.0 and in_view.any():
+            # the detector's labels leave out objects less than half in the frame: a box is not expected
+            idx = np.flatnonzero(in_view)
+            corners = np.stack([cand[k].footprint.corners for k in idx.tolist()])
+            in_view[idx] = in_frame_fractions(corners, heights[idx], T_base_map, cam) >= frame_share
         view = np.flatnonzero(in_view).tolist()
         # of those, the ones explained by a box of their class whose wedge holds them
         boxed = [k for k in view if cand[k].label in labels]

@@ -4,12 +4,18 @@ Presence confidence: ``X_p0 = c/F``; on each new frame in which the object is se
 ``X_f ← min(X_f + 1, F)`` then ``X_p ← max(X_p, Y_c·X_f/F)`` (the implementation's order and cap;
 the paper's text increments after and without a cap, which would let ``X_p`` exceed 1).
 
+Presence evidence (improved mode): the published presence is the soft decision's capped by
+:func:`evidence_presence`, the probability that the object is there given the frames that boxed it and
+the frames in which it was in clear view but not boxed.
+
 Ghost decay (improved mode): an object whose position is in the camera's view, within range and not
 occluded according to the LIDAR, but that no box of its class explains, loses
 ``decay_rate_per_s · dt`` of presence. Occluded objects keep theirs.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +38,21 @@ def update_presence(presence: float, frames: int, confidence: float, frames_for_
     f = min(int(frames) + 1, F)
     p = max(float(presence), float(np.clip(confidence, 0.0, 1.0)) * f / F)
     return p, f
+
+
+def evidence_presence(detections: int, misses: int, detection_rate: float, false_detection_rate: float) -> float:
+    """P(the object is there | boxed in ``detections`` frames, missed in ``misses`` frames of clear view).
+
+    A binary Bayes filter from an even prior: a frame that boxes the object multiplies its odds by
+    ``q1/q0``, a clear miss by ``(1 − q1)/(1 − q0)``, where ``q1 = detection_rate`` is how often the
+    detector boxes an object that is there and in clear view, and ``q0 = false_detection_rate`` how often
+    it boxes that class again at a place where it fired without an object (a stool taken for a gnome).
+    1.0 (no evidence against) unless ``0 < q0 < q1 < 1``."""
+    q1, q0 = float(detection_rate), float(false_detection_rate)
+    if not 0.0 < q0 < q1 < 1.0:
+        return 1.0
+    log_odds = max(int(detections), 0) * math.log(q1 / q0) - max(int(misses), 0) * math.log((1.0 - q0) / (1.0 - q1))
+    return 1.0 / (1.0 + math.exp(-min(max(log_odds, -50.0), 50.0)))
 
 
 def decay_presence(presence: float, rate_per_s: float, dt: float) -> float:
@@ -82,6 +103,39 @@ def centers_in_camera_view(
     cx, cy = camera.center_base[:2].tolist()
     ok &= np.hypot(c_base[:, 0] - cx, c_base[:, 1] - cy) <= max_range_m
     return ok
+
+
+def in_frame_fractions(
+    corners: FloatArray, heights_m: FloatArray, T_base_frame: Pose2, camera: CameraModel
+) -> FloatArray:
+    """``(N,)`` share of each object's image box inside the image: the box of its 3D outline (its
+    footprint's ``(N, 4, 2)`` corners in the frame, from the floor to ``(N,)`` heights) projected without
+    clipping, and how much of that box the image holds (the rule the detector's labels follow: an object
+    less than half in the frame is not labelled, so not expected to be boxed). 0 for an outline
+    reaching behind the camera (an object the camera is inside of, or beside)."""
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2)
+    n = len(c)
+    if n == 0:
+        return np.zeros(0)
+    c_base = T_base_frame.transform_points(c.reshape(-1, 2)).reshape(n, 4, 2)
+    p = np.empty((n, 8, 3))
+    p[:, :4, :2] = c_base
+    p[:, 4:, :2] = c_base
+    p[:, :4, 2] = 0.0
+    p[:, 4:, 2] = np.asarray(heights_m, dtype=np.float64).reshape(-1, 1)
+    uv, depth = camera.project(p.reshape(-1, 3))
+    uv, depth = uv.reshape(n, 8, 2), depth.reshape(n, 8)
+    W, H = float(camera.info.width), float(camera.info.height)
+    with np.errstate(invalid="ignore"):
+        u0, u1 = uv[:, :, 0].min(axis=1), uv[:, :, 0].max(axis=1)
+        v0, v1 = uv[:, :, 1].min(axis=1), uv[:, :, 1].max(axis=1)
+        area = np.maximum(u1 - u0, 1e-9) * np.maximum(v1 - v0, 1e-9)
+        inside = np.clip(np.minimum(u1, W) - np.maximum(u0, 0.0), 0.0, None) * np.clip(
+            np.minimum(v1, H) - np.maximum(v0, 0.0), 0.0, None
+        )
+        frac = inside / area
+    frac[~np.all(depth > 0.05, axis=1) | ~np.isfinite(frac)] = 0.0
+    return frac
 
 
 def occluded_by_scan(

@@ -27,7 +27,7 @@ from app.ocslam.evidence import NO_KEYFRAME, ObjectEvidence
 from app.ocslam.footprint import Footprint, min_area_rect, nearest_distances
 from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.messages import OccupancyGrid, TrackedObject
-from app.ocslam.presence import initial_presence, update_presence
+from app.ocslam.presence import evidence_presence, initial_presence, update_presence
 from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]
@@ -319,8 +319,9 @@ def merge_tracks(keep: Track, drop: Track, cfg: ConsciousnessConfig, known_free:
     keep.refresh(known_free)
 
 
-def export_track(t: Track, kf_poses: dict[int, Pose2]) -> TrackedObject:
-    """The published object (``map`` frame), anchored to its latest keyframe."""
+def export_track(t: Track, kf_poses: dict[int, Pose2], cfg: ConsciousnessConfig | None = None) -> TrackedObject:
+    """The published object (``map`` frame), anchored to its latest keyframe. With ``cfg`` and its
+    ``presence_evidence``, its presence is the soft decision's capped by :func:`evidence_presence`."""
     fp = t.footprint
     assert fp is not None
     pose = Pose2(float(fp.center[0]), float(fp.center[1]), float(angle_wrap(fp.yaw)))
@@ -334,7 +335,9 @@ def export_track(t: Track, kf_poses: dict[int, Pose2]) -> TrackedObject:
         size_x=float(fp.size_x),
         size_y=float(fp.size_y),
         size_z=float(t.prior.height[1]),
-        presence=float(t.presence),
+        presence=float(min(t.presence, evidence_presence(t.detections, t.misses, float(cfg.detection_rate),
+                                                         float(cfg.false_detection_rate))))
+        if cfg is not None and cfg.presence_evidence else float(t.presence),
         detection_confidence=float(t.confidence),
         frames_seen=int(t.frames),
         source=t.source,

@@ -45,7 +45,8 @@ class _Recorder:
 
     def apply_correction(self, keyframe_pose):
         poses = {}
-        for k in list(getattr(self._node, "_kf_poses", {})):
+        anchors = getattr(self._node, "_anchors", None)
+        for k in list(anchors.poses if anchors is not None else {}):
             try:
                 poses[k] = keyframe_pose(k)
             except (KeyError, IndexError):

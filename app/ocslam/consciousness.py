@@ -53,9 +53,9 @@ from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.evidence import NO_KEYFRAME
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import close_pairs, cluster_extents
+from app.ocslam.keyframe_anchors import KeyframeAnchors
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
 from app.ocslam.outside import seen_outside
 from app.ocslam.point_ownership import assign_points, contest_by_range
@@ -100,7 +100,7 @@ class Consciousness:
         self._tracks: list[Track] = []
         self._next_id = 0
         self._mode = cfg.mode
-        self._kf_poses: dict[int, Pose2] = {}
+        self._anchors = KeyframeAnchors()
         self._last_pose: Pose2 | None = None
         self._last_stamp: float | None = None
         self.last_report: FrameReport | None = None
@@ -125,7 +125,7 @@ class Consciousness:
         """Every tracked object (any presence), in the objects' frame (``map``; ``odom`` in seed mode)."""
         if self._mode == "seed":
             return self._seed.tracked_objects("odom")
-        return [export_track(t, self._kf_poses, self.cfg) for t in self._tracks if t.footprint is not None]
+        return [export_track(t, self._anchors.poses, self.cfg) for t in self._tracks if t.footprint is not None]
 
     def visible_objects(self) -> list[TrackedObject]:
         """Objects with presence ≥ ``presence_threshold`` (the published map)."""
@@ -136,7 +136,7 @@ class Consciousness:
         self._seed.reset()
         self._tracks = []
         self._next_id = 0
-        self._kf_poses = {}
+        self._anchors = KeyframeAnchors()
         self._last_pose = None
         self._last_stamp = None
         self.last_report = None
@@ -184,18 +184,7 @@ class Consciousness:
         """
         if self._mode == "seed":
             return 0
-        deltas: dict[int, Pose2] = {}
-        for k, old in list(self._kf_poses.items()):
-            try:
-                new = keyframe_pose(k)
-            except (KeyError, IndexError):
-                continue
-            if new is None or not all(math.isfinite(v) for v in new):
-                continue
-            d = new @ old.inverse()
-            self._kf_poses[k] = new
-            if abs(d.x) > 1e-9 or abs(d.y) > 1e-9 or abs(d.yaw) > 1e-9:
-                deltas[k] = d
+        deltas = self._anchors.correct(keyframe_pose)
         if deltas:
             self._apply_deltas(deltas)
         return len(deltas)
@@ -207,7 +196,7 @@ class Consciousness:
             "version": 1,
             "mode": self._mode,
             "next_id": self._next_id,
-            "keyframes": {str(k): list(v) for k, v in self._kf_poses.items()},
+            "keyframes": {str(k): list(v) for k, v in self._anchors.poses.items()},
             "tracks": tracks_state(self._tracks),
             "seed": self._seed.state_dict(),
         }
@@ -228,7 +217,7 @@ class Consciousness:
         self._mode = mode
         self.cfg.mode = mode
         self._tracks = tracks
-        self._kf_poses = kfs
+        self._anchors = KeyframeAnchors(kfs)
         self._seed = seed
         self._next_id = int(d.get("next_id", max((t.id for t in tracks), default=-1) + 1))
 
@@ -293,17 +282,9 @@ class Consciousness:
         max_r = float(cfg.max_object_range_m)
 
         # keyframe anchor; a known keyframe given with a new pose is a correction for it
-        kf = NO_KEYFRAME
-        if keyframe is not None:
-            k, T_map_kf = int(keyframe[0]), keyframe[1]
-            if all(math.isfinite(v) for v in T_map_kf):
-                kf = k
-                old = self._kf_poses.get(k)
-                self._kf_poses[k] = T_map_kf
-                if old is not None:
-                    d = T_map_kf @ old.inverse()
-                    if abs(d.x) > 1e-9 or abs(d.y) > 1e-9 or abs(d.yaw) > 1e-9:
-                        self._apply_deltas({k: d})
+        kf, deltas = self._anchors.attach(keyframe)
+        if deltas:
+            self._apply_deltas(deltas)
 
         if robot_moved is None:
             lp = self._last_pose

@@ -196,13 +196,22 @@ def decode_output(
 MODELS_DIR = Path(__file__).resolve().parents[2] / "assets" / "models"
 
 
+#: file_sha256's results by (path, size, modification time): a model is hashed once per process, however
+#: often its card, its calibration or a sweep's recording key asks for it
+_SHA256: dict[tuple[str, int, int], str] = {}
+
+
 def file_sha256(path: Path) -> str:
-    """Hex sha256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+    """Hex sha256 of a file's bytes (cached while the file's size and modification time stay the same)."""
+    st = Path(path).stat()
+    key = (str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _SHA256:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+        _SHA256[key] = h.hexdigest()
+    return _SHA256[key]
 
 
 def _card_entries(card: dict) -> list[dict]:
@@ -298,15 +307,19 @@ def detector_score_calibration(detector: object) -> ScoreCalibration:
     return cal if isinstance(cal, ScoreCalibration) else ScoreCalibration()
 
 
+def _calibration_of(model: Path, calibration: str) -> ScoreCalibration:
+    """``model``'s card calibration with ``detector.calibration: card`` (identity without one, or ``off``)."""
+    if calibration != "card" or not model.is_file():
+        return ScoreCalibration()
+    return model_score_calibration(model) or ScoreCalibration()
+
+
 def score_calibration_for(cfg: DetectorConfig) -> ScoreCalibration:
     """The score → probability map the object map uses with ``cfg``'s detector: the model card's for
     ``kind: yolo`` with ``calibration: card``, else the identity (the oracle's and the paper's scores)."""
-    if cfg.kind != "yolo" or cfg.calibration != "card":
+    if cfg.kind != "yolo":
         return ScoreCalibration()
-    path = _resolve(cfg.model_path)
-    if not path.is_file():
-        return ScoreCalibration()
-    return model_score_calibration(path) or ScoreCalibration()
+    return _calibration_of(_resolve(cfg.model_path), cfg.calibration)
 
 
 def session_config_entries(cfg: DetectorConfig) -> dict[str, str]:
@@ -362,9 +375,7 @@ class Detector:
         self.sha256: str | None = verify_model_hash(path) if getattr(cfg, "verify_hash", True) else None
         #: the card's score → probability map (identity: ``calibration: off``, or the card has none);
         #: :class:`~app.ocslam.consciousness.Consciousness` applies it, the boxes keep the raw score
-        self.score_calibration: ScoreCalibration = (
-            (model_score_calibration(path) or ScoreCalibration()) if cfg.calibration == "card" else ScoreCalibration()
-        )
+        self.score_calibration: ScoreCalibration = _calibration_of(path, cfg.calibration)
         import onnxruntime as ort
 
         opts = ort.SessionOptions()

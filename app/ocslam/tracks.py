@@ -328,6 +328,10 @@ def export_track(t: Track, kf_poses: dict[int, Pose2], cfg: ConsciousnessConfig 
     kf = t.evidence.latest_keyframe()
     anchor = kf if kf != NO_KEYFRAME and kf in kf_poses else None
     T_kf_obj = kf_poses[anchor].inverse() @ pose if anchor is not None else None
+    presence = float(t.presence)
+    if cfg is not None and cfg.presence_evidence:
+        presence = min(presence, evidence_presence(t.detections, t.misses, float(cfg.detection_rate),
+                                                   float(cfg.false_detection_rate)))
     return TrackedObject(
         id=t.id,
         label=t.label,
@@ -335,9 +339,7 @@ def export_track(t: Track, kf_poses: dict[int, Pose2], cfg: ConsciousnessConfig 
         size_x=float(fp.size_x),
         size_y=float(fp.size_y),
         size_z=float(t.prior.height[1]),
-        presence=float(min(t.presence, evidence_presence(t.detections, t.misses, float(cfg.detection_rate),
-                                                         float(cfg.false_detection_rate))))
-        if cfg is not None and cfg.presence_evidence else float(t.presence),
+        presence=presence,
         detection_confidence=float(t.confidence),
         frames_seen=int(t.frames),
         source=t.source,

@@ -102,9 +102,6 @@ def load_world_of(w: World):
     return generate(w.family or "rooms", int(w.seed or 0))
 
 
-_MODEL_SHA: dict[tuple[str, int, int], str] = {}
-
-
 def detector_model_sha256(cfg_dict: dict[str, Any]) -> str | None:
     """sha256 of the ONNX model a config's YOLO detector loads (``None`` for other detectors or a model
     that is not there: the recording will say why); cached by path, size and modification time."""
@@ -112,16 +109,13 @@ def detector_model_sha256(cfg_dict: dict[str, Any]) -> str | None:
     if str(det.get("kind", "yolo")) != "yolo":
         return None
     from app.config import resolve_path
+    from app.ocslam.detector import file_sha256
 
     path = Path(resolve_path(str(det.get("model_path") or "assets/models/detector.onnx")))
     try:
-        st = path.stat()
+        return file_sha256(path)
     except OSError:
         return None
-    key = (str(path), st.st_size, st.st_mtime_ns)
-    if key not in _MODEL_SHA:
-        _MODEL_SHA[key] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return _MODEL_SHA[key]
 
 
 def recording_key(cfg_dict: dict[str, Any], w: World, floor: float, duration: float) -> str:

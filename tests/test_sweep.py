@@ -176,3 +176,21 @@ def test_a_recording_key_names_the_detector_models_content(tmp_path):
     k3 = recording_key(oracle.to_dict(), w, 0.2, 100.0)
     model.write_bytes(b"a third")
     assert recording_key(oracle.to_dict(), w, 0.2, 100.0) == k3
+
+
+def test_a_recording_key_names_the_world_files_content_not_its_path(tmp_path):
+    """An edited world (another route, a moved object) is another recording; the same content elsewhere
+    (another checkout) is the same one."""
+    from app.sweep.suite import World, recording_key
+
+    cfg = Config()
+    cfg.set("detector.kind", "oracle")
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    text = "# a world\nname: w\n"
+    (a / "w.yaml").write_text(text)
+    (b / "w.yaml").write_text(text)
+    k1 = recording_key(cfg.to_dict(), World("w", file=str(a / "w.yaml")), 0.2, 100.0)
+    assert recording_key(cfg.to_dict(), World("w", file=str(b / "w.yaml")), 0.2, 100.0) == k1
+    (a / "w.yaml").write_text(text + "routes: {tour: [[1.0, 0.0]]}\n")
+    assert recording_key(cfg.to_dict(), World("w", file=str(a / "w.yaml")), 0.2, 100.0) != k1

@@ -12,8 +12,9 @@ recorded boxes with confidence ``≥ t`` (:func:`app.sweep.trace.filter_detectio
 
 Recordings live in a cache folder, one per world and *recording key* (a hash of everything that changes
 what the sensors and the detector produce: the config without its consciousness, UI, server and replay
-sections, the detector model's content (its sha256: a retrained model at the same path is another
-recording), the floor, the route and the duration); a recording with the same key is reused.
+sections, the world file's or bag's content and the detector model's content (sha256s: an edited world or a
+retrained model at the same path is another recording), the floor, the route and the duration); a
+recording with the same key is reused.
 """
 
 from __future__ import annotations
@@ -124,12 +125,27 @@ def recording_key(cfg_dict: dict[str, Any], w: World, floor: float, duration: fl
     d = json.loads(json.dumps(d, default=str))
     d.setdefault("detector", {})["confidence"] = round(float(floor), 6)
     d["detector"].pop("calibration", None)  # how the object map reads the scores, not which boxes were recorded
-    job: dict[str, Any] = {"cfg": d, "world": w.job(), "duration": float(duration), "v": 1}
+    world = w.job()
+    for k in ("file", "bag"):  # what the file holds, not where it lies: an edited world is another recording
+        if k in world:
+            world[k] = content_sha256(Path(world[k]))
+    job: dict[str, Any] = {"cfg": d, "world": world, "duration": float(duration), "v": 2}
     sha = detector_model_sha256(cfg_dict)
     if sha is not None:
         job["model"] = sha
     blob = json.dumps(job, sort_keys=True)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
+
+
+def content_sha256(path: Path) -> str:
+    """sha256 of a world or bag file (``missing:<name>`` when it cannot be read: recording it fails later,
+    with the reader's own message)."""
+    from app.ocslam.detector import file_sha256
+
+    try:
+        return file_sha256(path)
+    except OSError:
+        return f"missing:{path.name}"
 
 
 def slug(name: str) -> str:

@@ -88,7 +88,9 @@ def prepare_world(cfg_dict: dict[str, Any], world: Any, cache: str, floor: float
     info: dict[str, Any] = {"world": world.name}
     if world.bag is not None:
         bag = Path(world.bag)
-        folder = Path(cache) / f"bag-{hashlib.sha1(str(bag).encode()).hexdigest()[:12]}"
+        from app.sweep.suite import content_sha256
+
+        folder = Path(cache) / f"bag-{content_sha256(bag)[:12]}"  # by content: a re-recorded bag is another trace
         folder.mkdir(parents=True, exist_ok=True)
         info["recorded"] = "given"
         rec_floor = 0.0

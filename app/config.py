@@ -30,7 +30,8 @@ from app.ocslam.config import (
     validate_section,
 )
 
-__all__ = ["Config", "ConfigError", "PROJECT_ROOT", "ASSETS", "resolve_path", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["Config", "ConfigError", "PROJECT_ROOT", "ASSETS", "resolve_path", "project_relative", "atomic_write_bytes",
+           "atomic_write_text"]
 
 #: The repository root (the package is installed editable by ``make setup``).
 PROJECT_ROOT = Path(os.environ.get("OCSLAM_ROOT", Path(__file__).resolve().parents[1]))
@@ -45,6 +46,15 @@ def resolve_path(p: str | os.PathLike[str]) -> Path:
     if (Path.cwd() / path).exists():
         return Path.cwd() / path
     return PROJECT_ROOT / path
+
+
+def project_relative(p: str | os.PathLike[str]) -> str:
+    """``p`` relative to the project when it lies inside it (what a model card or report writes down: no
+    machine's folders), else ``p`` as given."""
+    try:
+        return str(Path(p).resolve().relative_to(PROJECT_ROOT.resolve()))
+    except (ValueError, OSError):
+        return str(p)
 
 
 _UMASK = os.umask(0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from app.config import Config, ConfigError
@@ -83,3 +85,12 @@ def test_every_live_field_has_a_range_or_choices() -> None:
     for path, f, value in Config().iter_fields():
         if f.metadata.get("live") and isinstance(value, (int, float)) and not isinstance(value, bool):
             assert f.metadata.get("min") is not None and f.metadata.get("max") is not None, path
+
+
+def test_project_relative_names_no_machine_folder(tmp_path):
+    """What a model card writes down: paths inside the project relative to it, others as given."""
+    from app.config import PROJECT_ROOT, project_relative
+
+    assert project_relative(PROJECT_ROOT / "runs" / "detector" / "data.yaml") == str(Path("runs/detector/data.yaml"))
+    assert project_relative("datasets/sim") == str(Path("datasets/sim"))
+    assert project_relative(tmp_path / "elsewhere") == str(tmp_path / "elsewhere")

@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from app.config import atomic_write_bytes, atomic_write_text
+from app.config import atomic_write_bytes, atomic_write_text, project_relative
 from app.ocslam.detector import file_sha256
 from app.ocslam.messages import CLASS_NAMES
 
@@ -305,7 +305,7 @@ def optimize_for_inference(
         recipe = quantize_int8(static, q, images, float_prefixes=float_prefixes)
         atomic_write_bytes(out, q.read_bytes())
     recipe["calibration_data"] = {
-        "path": str(calib),
+        "path": project_relative(calib),
         "command": calib_meta.get("command"),
         "seed": calib_meta.get("seed"),
         "images_used": len(images),

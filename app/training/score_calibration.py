@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from app.config import project_relative
 from app.ocslam.calibration import expected_calibration_error, fit_platt, reliability
 from app.ocslam.messages import CLASS_NAMES
 from app.training.samples import Sample, load_samples
@@ -115,7 +116,7 @@ def fit_score_calibration(detector: Any, data_dir: Path, split: str = "val", flo
         "slope": round(cal.slope, 6),
         "offset": round(cal.offset, 6),
         "formula": "p = 1 / (1 + exp(-(slope * logit(score) + offset)))",
-        "fitted_on": {"path": str(data_dir), "split": split, "images": len(samples), "score_floor": floor,
+        "fitted_on": {"path": project_relative(data_dir), "split": split, "images": len(samples), "score_floor": floor,
                       "boxes": int(len(s)), "right": int(y.sum()), "seed": recipe.get("seed"),
                       "dataset_command": recipe.get("command")},
         "ece_before": round(expected_calibration_error(s, y), 4),

@@ -26,7 +26,7 @@ from typing import Any
 
 import yaml
 
-from app.config import PROJECT_ROOT, atomic_write_bytes, atomic_write_text
+from app.config import PROJECT_ROOT, atomic_write_bytes, atomic_write_text, project_relative
 from app.ocslam.detector import file_sha256, input_shape_for
 from app.ocslam.messages import CLASS_NAMES
 from app.training.optimize import compress_weights_fp16
@@ -392,9 +392,10 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "note": "images keep their aspect: width = input width, height letterboxed up to a multiple of 32",
         },
         "dataset": {
-            "path": str(Path(opts.data)),
+            "path": project_relative(opts.data),
             "command": dataset_meta.get("command"),
-            "parts": [{k: p.get(k) for k in ("path", "command", "seed", "images", "families")}
+            "parts": [{k: (project_relative(p[k]) if k == "path" and p.get(k) else p.get(k))
+                       for k in ("path", "command", "seed", "images", "families")}
                       for p in dataset_meta.get("datasets", [])] or None,
             "seed": dataset_meta.get("seed"),
             "images": dataset_meta.get("images"),
@@ -411,8 +412,8 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "patience": int(getattr(targs, "patience", opts.patience) or opts.patience),
             "overrides": dict(opts.extra) or None,
             "time_budget_h": opts.hours,
-            "initialised_from": str(opts.init_weights) if opts.init_weights
-            else (f"{targs.pretrained} (the run's start; resumed)" if opts.resume and isinstance(getattr(targs, "pretrained", None), str)
+            "initialised_from": project_relative(opts.init_weights) if opts.init_weights
+            else (f"{project_relative(targs.pretrained)} (the run's start; resumed)" if opts.resume and isinstance(getattr(targs, "pretrained", None), str)
                   else "random (from the model yaml)"),
             "training_time_h": round(train_s / 3600.0, 3),
             "device": f"cpu ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)",

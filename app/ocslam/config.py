@@ -366,7 +366,7 @@ class ConsciousnessConfig:
     )
     sync_tolerance_s: float = param(0.1, min=0.0, max=2.0, unit="s", help="improved: max image/scan stamp gap")
     range_tolerance: float = param(
-        0.25, min=0.0, max=2.0, step=0.01, help="improved: relative slack of the near range given by the box's bottom edge", live=True
+        0.2, min=0.0, max=2.0, step=0.01, help="improved: relative slack of the near range given by the box's bottom edge", live=True
     )
     bottom_margin_px: float = param(
         6.0, min=0.0, max=100.0, step=1.0, unit="px", help="improved: bottom-edge uncertainty used for the near range", live=True

@@ -194,3 +194,20 @@ def test_a_recording_key_names_the_world_files_content_not_its_path(tmp_path):
     assert recording_key(cfg.to_dict(), World("w", file=str(b / "w.yaml")), 0.2, 100.0) == k1
     (a / "w.yaml").write_text(text + "routes: {tour: [[1.0, 0.0]]}\n")
     assert recording_key(cfg.to_dict(), World("w", file=str(a / "w.yaml")), 0.2, 100.0) != k1
+
+
+def test_a_recording_key_names_the_models_content_not_its_path(tmp_path):
+    """The same model moved to another path (a candidate in runs/ copied into assets/) is the same recording."""
+    from app.sweep.suite import World, recording_key
+
+    a, b = tmp_path / "a.onnx", tmp_path / "b.onnx"
+    a.write_bytes(b"the same weights")
+    b.write_bytes(b"the same weights")
+    w = World("w", seed=3, family="rooms")
+    keys = []
+    for m in (a, b):
+        cfg = Config()
+        cfg.set("detector.kind", "yolo")
+        cfg.set("detector.model_path", str(m))
+        keys.append(recording_key(cfg.to_dict(), w, 0.2, 100.0))
+    assert keys[0] == keys[1]

@@ -129,10 +129,11 @@ def recording_key(cfg_dict: dict[str, Any], w: World, floor: float, duration: fl
     for k in ("file", "bag"):  # what the file holds, not where it lies: an edited world is another recording
         if k in world:
             world[k] = content_sha256(Path(world[k]))
-    job: dict[str, Any] = {"cfg": d, "world": world, "duration": float(duration), "v": 2}
+    job: dict[str, Any] = {"cfg": d, "world": world, "duration": float(duration), "v": 3}
     sha = detector_model_sha256(cfg_dict)
-    if sha is not None:
+    if sha is not None:  # the model's content, not the file it was read from (a model moved into place is the same)
         job["model"] = sha
+        d["detector"].pop("model_path", None)
     blob = json.dumps(job, sort_keys=True)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
 

@@ -92,3 +92,29 @@ def test_resume_on_other_data_restarts_the_best_epoch_but_keeps_the_run(tmp_path
     assert other["best_fitness"] is None and other["stopper"] is None
     assert other["epoch"] == 4 and other["optimizer"] is not None
     assert other["train_args"]["data"] == str((b / "data.yaml").resolve()) and other["train_args"]["epochs"] == 10
+
+
+def test_a_stretched_schedule_restarts_early_stopping_and_patience_can_be_changed(tmp_path: Path) -> None:
+    """Stretching the schedule raises the learning rate again: the saved early-stopping state (best epoch long
+    ago) would end the stretched run at once, so it starts again; ``--patience`` on resume replaces the saved."""
+    torch = pytest.importorskip("torch")
+
+    from app.training.train import _resume_checkpoint
+
+    data = tmp_path / "data.yaml"
+    data.write_text("path: .\ntrain: images/train\nval: images/val\nnames: {0: ball}\n")
+    ck = tmp_path / "detector-train.pt"
+    saved = {"epoch": 49, "optimizer": {"state": {}}, "best_fitness": 0.7,
+             "stopper": {"best_fitness": 0.7, "best_epoch": 39},
+             "train_args": {"data": str(data), "epochs": 60, "patience": 10}}
+    torch.save(saved, str(ck))
+    from dataclasses import replace
+
+    same = _resume_checkpoint(replace(_opts(tmp_path, data, resume=True), checkpoint=ck, epochs=60), data, tmp_path / "runs")
+    kept = torch.load(str(same), map_location="cpu", weights_only=False)
+    assert kept["stopper"] == {"best_fitness": 0.7, "best_epoch": 39} and kept["train_args"]["patience"] == 10
+    stretched = _resume_checkpoint(replace(_opts(tmp_path, data, resume=True), checkpoint=ck, epochs=80, patience=25),
+                                   data, tmp_path / "runs")
+    st = torch.load(str(stretched), map_location="cpu", weights_only=False)
+    assert st["stopper"] is None and st["best_fitness"] == 0.7  # best.pt still only changes for a better epoch
+    assert st["train_args"]["epochs"] == 80 and st["train_args"]["patience"] == 25

@@ -83,7 +83,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="learning-rate warm-up epochs (default ultralytics' 3; 0 to refine a trained model)")
     p.add_argument("--optimizer", choices=("auto", "SGD", "AdamW", "Adam"), default=None,
                    help="optimizer (default auto: ultralytics picks by the run's length)")
-    p.add_argument("--patience", type=int, default=15, help="stop after this many epochs without a better val mAP")
+    p.add_argument("--patience", type=int, default=None,
+                   help="stop after this many epochs without a better val mAP (default 15; with --resume: the saved "
+                        "run's, or this to change it)")
     p.add_argument("--workers", type=int, default=2, help="data loader processes")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--close-mosaic", type=int, default=10, help="last epochs trained without mosaic augmentation")

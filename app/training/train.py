@@ -53,7 +53,7 @@ class TrainOptions:
     epochs: int = 60
     hours: float | None = 1.0
     batch: int = 16
-    patience: int = 15
+    patience: int | None = None  # None: 15 for a new run, the saved run's on --resume
     workers: int = 2
     seed: int = 0
     cache: bool = True
@@ -114,6 +114,11 @@ def _resume_checkpoint(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> P
               exist_ok=True, device="cpu", workers=opts.workers, cache=opts.cache, time=None, plots=False)
     if opts.epochs and int(opts.epochs) > int(ta.get("epochs", 0)):
         ta["epochs"] = int(opts.epochs)
+        # a stretched schedule raises the learning rate again, so the next epochs are worse for a while: early
+        # stopping counts from here (the best weights and best.pt still only change for a better epoch)
+        ckpt["stopper"] = None
+    if opts.patience is not None:
+        ta["patience"] = int(opts.patience)
     ckpt["train_args"] = ta
     last = save_dir / "weights" / "last.pt"
     last.parent.mkdir(parents=True, exist_ok=True)
@@ -255,7 +260,7 @@ def _fresh_args(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> dict[str
         imgsz=opts.imgsz,
         epochs=opts.epochs,
         batch=opts.batch,
-        patience=opts.patience,
+        patience=15 if opts.patience is None else int(opts.patience),
         workers=opts.workers,
         seed=opts.seed,
         device="cpu",
@@ -320,12 +325,15 @@ def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
     def on_fit_epoch_end(trainer) -> None:
         state["epochs"] += 1
         per_epoch = (time.monotonic() - t_start) / state["epochs"]
+        early = bool(trainer.stop)  # ultralytics' early stopping (patience) decided before this callback
         if opts.session_epochs is not None and state["epochs"] >= opts.session_epochs:
             trainer.stop = True
         elif opts.checkpoint is not None and opts.hours and time.monotonic() - t_start + per_epoch > opts.hours * 3600:
             trainer.stop = True
         if trainer.stop and trainer.epoch + 1 < trainer.epochs:
-            log(f"session ends after epoch {trainer.epoch + 1} of {trainer.epochs}; continue with --resume")
+            why = (f"early stopping: no better epoch in the last {getattr(trainer.args, 'patience', '?')} (raise it "
+                   "with --resume --patience N)" if early else "the session's budget")
+            log(f"session ends after epoch {trainer.epoch + 1} of {trainer.epochs} ({why}); continue with --resume")
 
     model.add_callback("on_model_save", on_model_save)
     model.add_callback("on_fit_epoch_end", on_fit_epoch_end)
@@ -409,7 +417,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "best_epoch": int(best_row["epoch"]) if best_row else None,
             "imgsz": opts.imgsz,
             "batch": opts.batch,
-            "patience": int(getattr(targs, "patience", opts.patience) or opts.patience),
+            "patience": int(getattr(targs, "patience", None) or opts.patience or 15),
             "overrides": dict(opts.extra) or None,
             "time_budget_h": opts.hours,
             "initialised_from": project_relative(opts.init_weights) if opts.init_weights

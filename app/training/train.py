@@ -325,7 +325,8 @@ def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
     def on_fit_epoch_end(trainer) -> None:
         state["epochs"] += 1
         per_epoch = (time.monotonic() - t_start) / state["epochs"]
-        early = bool(trainer.stop)  # ultralytics' early stopping (patience) decided before this callback
+        st = getattr(trainer, "stopper", None)  # ultralytics' early stopping: no better epoch for `patience` epochs
+        early = st is not None and bool(st.patience) and trainer.epoch + 1 - int(st.best_epoch) >= int(st.patience)
         if opts.session_epochs is not None and state["epochs"] >= opts.session_epochs:
             trainer.stop = True
         elif opts.checkpoint is not None and opts.hours and time.monotonic() - t_start + per_epoch > opts.hours * 3600:

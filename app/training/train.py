@@ -53,7 +53,7 @@ class TrainOptions:
     epochs: int = 60
     hours: float | None = 1.0
     batch: int = 16
-    patience: int | None = None  # None: 15 for a new run, the saved run's on --resume
+    patience: int | None = None  # None: DEFAULT_PATIENCE for a new run, the saved run's on --resume
     workers: int = 2
     seed: int = 0
     cache: bool = True
@@ -79,6 +79,10 @@ class TrainResult:
     start_epoch: int = 0  # first epoch (0-based) trained in this session
     epochs_done: int = 0  # epochs completed by the run so far (all sessions)
     checkpoint: Path | None = None
+
+
+#: epochs without a better validation mAP before a new run stops (``--patience``)
+DEFAULT_PATIENCE = 15
 
 
 def _same_data(saved: Any, data_yaml: Path) -> bool:
@@ -260,7 +264,7 @@ def _fresh_args(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> dict[str
         imgsz=opts.imgsz,
         epochs=opts.epochs,
         batch=opts.batch,
-        patience=15 if opts.patience is None else int(opts.patience),
+        patience=DEFAULT_PATIENCE if opts.patience is None else int(opts.patience),
         workers=opts.workers,
         seed=opts.seed,
         device="cpu",
@@ -332,7 +336,7 @@ def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
         elif opts.checkpoint is not None and opts.hours and time.monotonic() - t_start + per_epoch > opts.hours * 3600:
             trainer.stop = True
         if trainer.stop and trainer.epoch + 1 < trainer.epochs:
-            why = (f"early stopping: no better epoch in the last {getattr(trainer.args, 'patience', '?')} (raise it "
+            why = (f"early stopping: no better epoch in the last {st.patience if st is not None else '?'} (raise it "
                    "with --resume --patience N)" if early else "the session's budget")
             log(f"session ends after epoch {trainer.epoch + 1} of {trainer.epochs} ({why}); continue with --resume")
 
@@ -403,8 +407,8 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
         "dataset": {
             "path": project_relative(opts.data),
             "command": dataset_meta.get("command"),
-            "parts": [{k: (project_relative(p[k]) if k == "path" and p.get(k) else p.get(k))
-                       for k in ("path", "command", "seed", "images", "families")}
+            "parts": [{"path": project_relative(p["path"]) if p.get("path") else None,
+                       **{k: p.get(k) for k in ("command", "seed", "images", "families")}}
                       for p in dataset_meta.get("datasets", [])] or None,
             "seed": dataset_meta.get("seed"),
             "images": dataset_meta.get("images"),
@@ -418,7 +422,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "best_epoch": int(best_row["epoch"]) if best_row else None,
             "imgsz": opts.imgsz,
             "batch": opts.batch,
-            "patience": int(getattr(targs, "patience", None) or opts.patience or 15),
+            "patience": int(getattr(targs, "patience", None) or opts.patience or DEFAULT_PATIENCE),
             "overrides": dict(opts.extra) or None,
             "time_budget_h": opts.hours,
             "initialised_from": project_relative(opts.init_weights) if opts.init_weights

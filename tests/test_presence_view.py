@@ -121,3 +121,49 @@ def test_a_table_filling_the_frame_is_not_a_clear_miss():
             c.update(detections([], cam), raycast(legs + [top], T, cam), T, stamp=1.2 + 0.2 * i)
         counts[share] = t.misses
     assert counts[0.5] == 0 and counts[0.0] == 5
+
+
+# --- visible_share: what the LIDAR sees of an object, and what may go on behind a nearer return --------------
+
+
+def _beams(step_deg: float = 0.5) -> np.ndarray:
+    return np.deg2rad(np.arange(-180.0, 180.0, step_deg))
+
+
+def _share(ranges: np.ndarray, extent: float = 0.5, fp: Footprint | None = None) -> float:
+    from app.ocslam.presence import visible_share
+
+    fp = fp if fp is not None else Footprint(np.array([2.0, 0.0]), 0.0, 0.2, 0.2)
+    return visible_share(fp, Pose2(0, 0, 0), _beams(), ranges, 0.2, extent)
+
+
+def test_visible_share_known_answers():
+    b = _beams()
+    free = np.full(len(b), 5.0)            # a wall 5 m away: nothing in front of the object
+    assert _share(free) == pytest.approx(1.0)
+    # a stub 1 m away right beside the object's left edge, 0.3 m wide: the object may go on behind it
+    span = math.atan2(0.1, 1.9)             # the footprint's half-span seen from the origin (nearest face)
+    stub = free.copy()
+    stub[(b > span) & (b <= span + math.atan2(0.15, 1.0))] = 1.0
+    s = _share(stub)
+    assert 0.3 < s < 0.7                    # the span's beams all reach it, but as many may be hidden
+    assert _share(stub, extent=0.0) == pytest.approx(1.0)   # an object known to end at its footprint
+    # the same stub 0.3 m to the side, not touching the span: nothing is hidden
+    away = free.copy()
+    away[(b > span + 0.1) & (b <= span + 0.2)] = 1.0
+    assert _share(away) == pytest.approx(1.0)
+    # the object's own span blocked: not seen at all
+    wall = free.copy()
+    wall[np.abs(b) < 0.3] = 1.0
+    assert _share(wall) == pytest.approx(0.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), extent=st.floats(0.0, 2.0), x=st.floats(0.8, 4.0), y=st.floats(-2.0, 2.0))
+def test_visible_share_is_a_share_and_shrinks_with_the_extent(seed, extent, x, y):
+    rng = np.random.default_rng(seed)
+    r = np.repeat(rng.uniform(0.2, 6.0, 72), 10)   # 72 surfaces of 5° each
+    fp = Footprint(np.array([x, y]), 0.3, 0.4, 0.25)
+    s = _share(r, extent, fp)
+    assert 0.0 <= s <= 1.0
+    assert _share(r, extent + 0.5, fp) <= s + 1e-12   # a longer possible object hides at least as much

@@ -347,6 +347,12 @@ class ConsciousnessConfig:
         "inside the image (the detector's labels leave out objects less than half in the frame; 0: its centre alone)",
         live=True,
     )
+    clear_view_visible: float = param(
+        0.5, min=0.0, max=1.0, step=0.05,
+        help="improved: a frame without a box counts as a miss only when the LIDAR sees this share of the object, "
+        "counting as hidden what may continue behind a nearer return at its edge (0: only the central-half occlusion test)",
+        live=True,
+    )
     presence_evidence: bool = param(
         True,
         help="improved: the published presence is at most P(object there | frames that boxed it, frames in clear view "

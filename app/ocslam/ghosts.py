@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import FrameReport
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.presence import centers_in_camera_view, decay_presence, in_frame_fractions, occluded_by_scan
+from app.ocslam.presence import centers_in_camera_view, decay_presence, in_frame_fractions, occluded_by_scan, visible_share
 from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track
@@ -73,13 +73,17 @@ def decay_tracks(
     if not missed:
         return list(tracks)
     keep = []
+    share = float(cfg.clear_view_visible)
     for t in tracks:
         if id(t) not in missed:
             keep.append(t)
             continue
         fp = t.footprint
         assert fp is not None
-        if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, float(cfg.occlusion_margin_m)):
+        margin = float(cfg.occlusion_margin_m)
+        if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, margin) or (
+            share > 0.0 and visible_share(fp, T_map_scan, beam_b_scan, beam_r_scan, margin, t.prior.length[1]) < share
+        ):
             keep.append(t)
             continue
         # a clear miss. Detectors miss real objects now and then (and the camera may be blocked above

@@ -169,3 +169,50 @@ def occluded_by_scan(
         return False
     blocked = beam_ranges[sel] < r_obj - margin_m
     return bool(np.mean(blocked) > 0.5)
+
+
+def visible_share(
+    footprint: Footprint,
+    T_frame_scan: Pose2,
+    beam_bearings: FloatArray,
+    beam_ranges: FloatArray,
+    margin_m: float,
+    extent_m: float,
+) -> float:
+    """Share of the object the LIDAR sees, counting what may continue behind a nearer return at its edge.
+
+    The footprint is only what the LIDAR has shown of the object so far: where a beam just beside its
+    angular span returns at least ``margin_m`` in front of it (a wall stub, another object), the object
+    may go on behind that return, up to ``extent_m`` (its class' typical length). Returns
+    ``seen / (span + hidden run)``: the beams inside the span that reach the object, over the beams of the
+    span plus the run of blocked beams adjoining it on either side (within ``extent_m`` at the object's
+    range). 1.0 when no beam falls near the object; 0.0 when it is behind the scan's origin.
+
+    ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return)."""
+    b_all = np.asarray(beam_bearings, dtype=np.float64)
+    r_all = np.asarray(beam_ranges, dtype=np.float64)
+    if len(b_all) == 0:
+        return 1.0
+    T_scan_frame = T_frame_scan.inverse()
+    corners = T_scan_frame.transform_points(np.vstack([footprint.corners, footprint.center[None, :]]))
+    b = np.arctan2(corners[:, 1], corners[:, 0])
+    rel = (b - b[-1] + np.pi) % (2 * np.pi) - np.pi
+    lo, hi = b[-1] + rel.min(), b[-1] + rel.max()
+    r_obj = footprint.transformed(T_scan_frame).nearest_distance(np.zeros(2))
+    if r_obj <= 0.0:
+        return 0.0
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    off = (b_all - mid + np.pi) % (2 * np.pi) - np.pi
+    blocked = r_all < r_obj - margin_m
+    inside = np.abs(off) <= half
+    if not inside.any():
+        inside[np.argmin(np.abs(off))] = True
+    pad = math.atan2(max(float(extent_m), 0.0), r_obj)
+    hidden = 0
+    for side in (1.0, -1.0):
+        s = side * off
+        near = np.flatnonzero((s > half) & (s <= half + pad))
+        run = blocked[near[np.argsort(s[near])]]
+        hidden += int(len(run) if run.all() else np.argmin(run))
+    seen = int(np.count_nonzero(inside & ~blocked))
+    return seen / float(np.count_nonzero(inside) + hidden)

@@ -482,7 +482,8 @@ def explain_misses(
                 cause, detail = "mislocated", f"{o.label} #{o.id} {dist(o):.2f} m from its centre"
             elif same:
                 o = max(same, key=lambda o: o.presence)
-                cause, detail = "below_threshold", f"{o.label} #{o.id} at presence {o.presence:.2f}"
+                cause, detail = "below_threshold", (f"{o.label} #{o.id} at presence {o.presence:.2f} ({o.frames_seen} "
+                                                      f"counted frames, box confidence {o.detection_confidence:.2f})")
         counts[cause] += 1
         row["cause"] = cause
         row["miss_detail"] = detail

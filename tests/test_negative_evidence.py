@@ -271,3 +271,29 @@ def test_two_objects_standing_on_each_others_centre_are_one():
     assert len(_collide([a, b])) == 1
     c = _legs_track(2, body + np.array([1.2, 0.0]), 0, "dog", stamp=2.0)
     assert len(_collide([_legs_track(0, body, 0, "dog"), c])) == 2
+
+
+def _ball_track(points: np.ndarray):
+    pts = np.asarray(points, dtype=np.float64)
+    c = Candidate(0, "ball", 0.9, "lidar_island", pts, Footprint(pts.mean(axis=0), 0.0, 0.5, 0.05), 2.0,
+                  ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=1.0)
+    return create_track(0, c, 0.0, -1, ConsciousnessConfig(), None)
+
+
+def test_a_near_centre_is_not_the_object_when_the_lidar_shows_two_things():
+    """A false ball's track lies behind a partition (points along x = 2.35); a real ball stands in front
+    of the partition (its centre, behind its visible surface, 0.26 m from the track's). Near centres alone made it the same object and
+    fed the false one; with LIDAR points on both sides, the points decide: 0.3 m apart, two things."""
+    cfg = ConsciousnessConfig()
+    behind = np.array([[2.35, y] for y in np.linspace(-0.25, 0.25, 6)])
+    track = _ball_track(behind)
+    front = np.array([[2.05, -0.1], [2.02, -0.05], [2.0, 0.0], [2.02, 0.05], [2.05, 0.1]])
+    cand = Candidate(1, "ball", 0.9, "lidar_island", front, Footprint(np.array([2.2, 0.0]), 0.0, 0.22, 0.22), 2.0,
+                     ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=1.0)
+    assert np.linalg.norm(track.footprint.center - cand.center) < cfg.tracking_threshold_m
+    assert associate(cand, [track], 1.0, cfg) is None
+    # the same ball seen again on the track's own points is the track
+    again = behind[1:4] + np.array([0.02, 0.0])
+    cand2 = Candidate(2, "ball", 0.9, "lidar_island", again, Footprint(again.mean(axis=0), 0.0, 0.2, 0.2), 2.0,
+                      ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=1.0)
+    assert associate(cand2, [track], 1.0, cfg) is track

@@ -23,7 +23,8 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
     """The tracked object of the candidate's class it is (paper's assumption 5), or ``None``.
 
     Nearest centre within ``tracking_threshold_m``, or the object's footprint (grown by half the
-    threshold) holding the candidate's centre or half its points, or the candidate's footprint
+    threshold) holding the candidate's centre — when both have LIDAR points, only if some of them lie
+    within half the threshold of each other — or half its points, or the candidate's footprint
     holding the object's centre; ground-plane placements along the line of sight; partial views
     that continue the object's points. Never an object another box of this frame already updated."""
     thr = float(cfg.tracking_threshold_m)
@@ -37,6 +38,10 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
             continue  # already seen in this frame through another box: another instance
         d = float(np.linalg.norm(t.footprint.center - c))
         match = d < thr or t.footprint.contains_point(c, margin=0.5 * thr)
+        if match and len(cand.points) and t.evidence.has_points and min_distance(cand.points, t.evidence.points) > 0.5 * thr:
+            # near, yet no point of it near the object's points: the LIDAR shows two things (a ball in
+            # front of a partition is not the false ball behind it that its centre is close to)
+            match = False
         if not match and len(cand.points):
             match = float(np.mean(t.footprint.contains(cand.points, margin=0.5 * thr))) >= 0.5
         if not match and cand.footprint is not None:

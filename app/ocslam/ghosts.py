@@ -16,7 +16,13 @@ from numpy.typing import NDArray
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import FrameReport
 from app.ocslam.config import ConsciousnessConfig
-from app.ocslam.presence import centers_in_camera_view, decay_presence, in_frame_fractions, occluded_by_scan, visible_share
+from app.ocslam.presence import (
+    centers_in_camera_view,
+    decay_presence,
+    in_frame_fractions,
+    occluded_by_scan,
+    visible_share,
+)
 from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track

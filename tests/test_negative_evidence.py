@@ -169,10 +169,12 @@ def test_a_stool_behind_a_pedestal_table_stops_shaping_it_once_seen_beside_it():
     assert errors[ConsciousnessConfig().outside_ratio] < 0.35
 
 
-def _chair_track(points: np.ndarray):
+def _island_track(points: np.ndarray, label: str = "chair", size: tuple[float, float] = (0.9, 0.6),
+                  ray_origin: tuple[float, float] = (2.6, 0.0), ray_dir: tuple[float, float] = (0.0, 1.0)):
+    """A track created from one LIDAR island of ``points`` seen along one ray."""
     ev_pts = np.asarray(points, dtype=np.float64)
-    c = Candidate(0, "chair", 0.9, "lidar_island", ev_pts, Footprint(ev_pts.mean(axis=0), 0.0, 0.9, 0.6), 2.0,
-                  ray_origin=np.array([2.6, 0.0]), ray_dir=np.array([0.0, 1.0]), ray_weight=1.0)
+    c = Candidate(0, label, 0.9, "lidar_island", ev_pts, Footprint(ev_pts.mean(axis=0), 0.0, *size), 2.0,
+                  ray_origin=np.array(ray_origin), ray_dir=np.array(ray_dir), ray_weight=1.0)
     return create_track(0, c, 0.0, -1, ConsciousnessConfig(), None)
 
 
@@ -192,7 +194,7 @@ def test_a_partial_view_does_not_continue_an_object_beyond_its_boxs_closed_edge(
     edge, so the desk chair is not its continuation, although one sofa-sized chair could hold both."""
     cfg = ConsciousnessConfig()
     arm = np.array([[x, y] for x in np.linspace(2.1, 3.1, 11) for y in (1.7, 1.9)])
-    track = _chair_track(arm)
+    track = _island_track(arm)
     desk = np.array([[2.4, 0.0], [2.8, 0.0], [2.4, 0.35], [2.8, 0.35]])
     robot = np.array([1.1, 1.0])
     b_left = math.atan2(0.45 - robot[1], 2.8 - robot[0])  # the box's left edge, just above the desk chair
@@ -273,20 +275,13 @@ def test_two_objects_standing_on_each_others_centre_are_one():
     assert len(_collide([_legs_track(0, body, 0, "dog"), c])) == 2
 
 
-def _ball_track(points: np.ndarray):
-    pts = np.asarray(points, dtype=np.float64)
-    c = Candidate(0, "ball", 0.9, "lidar_island", pts, Footprint(pts.mean(axis=0), 0.0, 0.5, 0.05), 2.0,
-                  ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=1.0)
-    return create_track(0, c, 0.0, -1, ConsciousnessConfig(), None)
-
-
 def test_a_near_centre_is_not_the_object_when_the_lidar_shows_two_things():
     """A false ball's track lies behind a partition (points along x = 2.35); a real ball stands in front
     of the partition (its centre, behind its visible surface, 0.26 m from the track's). Near centres alone made it the same object and
     fed the false one; with LIDAR points on both sides, the points decide: 0.3 m apart, two things."""
     cfg = ConsciousnessConfig()
     behind = np.array([[2.35, y] for y in np.linspace(-0.25, 0.25, 6)])
-    track = _ball_track(behind)
+    track = _island_track(behind, "ball", (0.5, 0.05), (0.0, 0.0), (1.0, 0.0))
     front = np.array([[2.05, -0.1], [2.02, -0.05], [2.0, 0.0], [2.02, 0.05], [2.05, 0.1]])
     cand = Candidate(1, "ball", 0.9, "lidar_island", front, Footprint(np.array([2.2, 0.0]), 0.0, 0.22, 0.22), 2.0,
                      ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=1.0)

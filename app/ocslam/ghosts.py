@@ -79,14 +79,13 @@ def decay_tracks(
     if not missed:
         return list(tracks)
     keep = []
-    share = float(cfg.clear_view_visible)
+    share, margin = float(cfg.clear_view_visible), float(cfg.occlusion_margin_m)
     for t in tracks:
         if id(t) not in missed:
             keep.append(t)
             continue
         fp = t.footprint
         assert fp is not None
-        margin = float(cfg.occlusion_margin_m)
         if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, margin) or (
             share > 0.0 and visible_share(fp, T_map_scan, beam_b_scan, beam_r_scan, margin, t.prior.length[1]) < share
         ):

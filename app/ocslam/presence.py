@@ -138,6 +138,19 @@ def in_frame_fractions(
     return frac
 
 
+def angular_span(footprint: Footprint, T_frame_scan: Pose2) -> tuple[float, float, float]:
+    """The object as the scan's origin sees it: ``(mid, half, r)``, the bearing of the middle of its
+    footprint's angular span, half that span (rad, about the scan origin) and its nearest distance (m;
+    0 when the origin is inside it)."""
+    T_scan_frame = T_frame_scan.inverse()
+    corners = T_scan_frame.transform_points(np.vstack([footprint.corners, footprint.center[None, :]]))
+    b = np.arctan2(corners[:, 1], corners[:, 0])
+    rel = (b - b[-1] + np.pi) % (2 * np.pi) - np.pi
+    lo, hi = b[-1] + rel.min(), b[-1] + rel.max()
+    r_obj = footprint.transformed(T_scan_frame).nearest_distance(np.zeros(2))
+    return float(0.5 * (lo + hi)), float(0.5 * (hi - lo)), float(r_obj)
+
+
 def occluded_by_scan(
     footprint: Footprint,
     T_frame_scan: Pose2,
@@ -149,12 +162,9 @@ def occluded_by_scan(
 
     ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return).
     """
-    corners = T_frame_scan.inverse().transform_points(np.vstack([footprint.corners, footprint.center[None, :]]))
-    b = np.arctan2(corners[:, 1], corners[:, 0])
-    rel = (b - b[-1] + np.pi) % (2 * np.pi) - np.pi
-    lo, hi = b[-1] + rel.min(), b[-1] + rel.max()
+    mid, half_span, r_obj = angular_span(footprint, T_frame_scan)
     # shrink to the central half so the object's own outline does not count
-    mid, half = 0.5 * (lo + hi), 0.25 * (hi - lo)
+    half = 0.5 * half_span
     off = (beam_bearings - mid + np.pi) % (2 * np.pi) - np.pi
     sel = np.abs(off) <= max(half, 0.6 * np.deg2rad(1.0))
     if not np.any(sel):
@@ -163,8 +173,6 @@ def occluded_by_scan(
             sel[np.argmin(np.abs(off))] = True
     if not np.any(sel):
         return False
-    fp_scan = footprint.transformed(T_frame_scan.inverse())
-    r_obj = fp_scan.nearest_distance(np.zeros(2))
     if r_obj <= 0.0:
         return False
     blocked = beam_ranges[sel] < r_obj - margin_m
@@ -193,15 +201,9 @@ def visible_share(
     r_all = np.asarray(beam_ranges, dtype=np.float64)
     if len(b_all) == 0:
         return 1.0
-    T_scan_frame = T_frame_scan.inverse()
-    corners = T_scan_frame.transform_points(np.vstack([footprint.corners, footprint.center[None, :]]))
-    b = np.arctan2(corners[:, 1], corners[:, 0])
-    rel = (b - b[-1] + np.pi) % (2 * np.pi) - np.pi
-    lo, hi = b[-1] + rel.min(), b[-1] + rel.max()
-    r_obj = footprint.transformed(T_scan_frame).nearest_distance(np.zeros(2))
+    mid, half, r_obj = angular_span(footprint, T_frame_scan)
     if r_obj <= 0.0:
         return 0.0
-    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     off = (b_all - mid + np.pi) % (2 * np.pi) - np.pi
     blocked = r_all < r_obj - margin_m
     inside = np.abs(off) <= half

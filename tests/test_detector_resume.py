@@ -118,3 +118,73 @@ def test_a_stretched_schedule_restarts_early_stopping_and_patience_can_be_change
     st = torch.load(str(stretched), map_location="cpu", weights_only=False)
     assert st["stopper"] is None and st["best_fitness"] == 0.7  # best.pt still only changes for a better epoch
     assert st["train_args"]["epochs"] == 80 and st["train_args"]["patience"] == 25
+
+
+def test_a_resumed_run_takes_a_new_batch_size_and_keeps_the_rest(tmp_path: Path) -> None:
+    """``--resume --batch 64`` (a GPU): the saved run's batch is replaced, the schedule and data are not."""
+    torch = pytest.importorskip("torch")
+    from dataclasses import replace
+
+    from app.training.train import _resume_checkpoint
+
+    data = tmp_path / "data.yaml"
+    data.write_text("path: .\ntrain: images/train\nval: images/val\nnames: {0: ball}\n")
+    ck = tmp_path / "detector-train.pt"
+    torch.save({"epoch": 9, "optimizer": {"state": {}}, "train_args": {"data": str(data), "epochs": 20, "batch": 16}},
+               str(ck))
+    kept = _resume_checkpoint(replace(_opts(tmp_path, data, resume=True), checkpoint=ck, epochs=0), data, tmp_path / "r")
+    assert torch.load(str(kept), weights_only=False)["train_args"]["batch"] == 16
+    new = _resume_checkpoint(replace(_opts(tmp_path, data, resume=True), checkpoint=ck, epochs=0, resume_batch=64),
+                             data, tmp_path / "r")
+    ta = torch.load(str(new), weights_only=False)["train_args"]
+    assert ta["batch"] == 64 and ta["epochs"] == 20 and ta["data"] == str(data.resolve())
+
+
+def test_a_fitted_schedule_ends_within_the_sessions_budget(tmp_path: Path) -> None:
+    """``--fit-schedule``: after the session's first epoch the schedule's end moves to the last epoch the
+    budget holds (here far fewer than the 40 asked for), and the run stops there with its schedule complete."""
+    pytest.importorskip("ultralytics")
+    import torch
+
+    from app.training.train import train_detector
+
+    data = _tiny_dataset(tmp_path / "data")
+    train_detector(_opts(tmp_path, data, session_epochs=1), log=lambda *_: None)
+    lines: list[str] = []
+    from dataclasses import replace
+
+    opts = replace(_opts(tmp_path, data, resume=True, fit_schedule=True), epochs=40, hours=0.006)
+    res = train_detector(opts, log=lines.append)
+    fitted = [ln for ln in lines if ln.startswith("schedule fitted")]
+    assert len(fitted) == 1 and "40 →" in fitted[0]
+    end = int(fitted[0].split("→ ")[1].split()[0])
+    assert 2 <= end < 40
+    saved = torch.load(str(tmp_path / "model" / "detector-train.pt"), map_location="cpu", weights_only=False)
+    assert saved["train_args"]["epochs"] == end  # the checkpoint carries the fitted schedule
+    rows = _lr_rows(tmp_path / "runs" / "train")
+    assert int(rows[-1]["epoch"]) == end  # it ran to the fitted end, not to 40
+    assert res.card["training"]["epochs_max"] == end
+
+
+def test_resumed_optimizer_state_takes_its_parameters_dtype_and_device() -> None:
+    """The committed checkpoint stores Adam's moments as bfloat16 on the CPU; before the first step they
+    become the parameters' float32 (CUDA's fused AdamW refuses a mix), the step counters stay."""
+    torch = pytest.importorskip("torch")
+    from types import SimpleNamespace
+
+    from app.training.train import TrainOptions, _add_session_callbacks
+
+    p = torch.nn.Parameter(torch.zeros(3))
+    opt = torch.optim.AdamW([p], fused=False)
+    opt.state[p] = {"step": torch.tensor(5.0), "exp_avg": torch.ones(3, dtype=torch.bfloat16),
+                    "exp_avg_sq": torch.ones(3, dtype=torch.bfloat16)}
+    opt.param_groups[0]["fused"] = True
+    callbacks: dict = {}
+    model = SimpleNamespace(add_callback=lambda name, fn: callbacks.setdefault(name, fn))
+    _add_session_callbacks(model, TrainOptions(data=Path("d")), log=lambda *_: None)
+    callbacks["on_train_start"](SimpleNamespace(optimizer=opt))
+    st = opt.state[p]
+    assert st["exp_avg"].dtype == torch.float32 and st["exp_avg_sq"].dtype == torch.float32
+    assert st["step"].item() == 5.0 and opt.param_groups[0]["fused"] is False
+    p.grad = torch.ones(3)
+    opt.step()  # steps with the restored moments

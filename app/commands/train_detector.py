@@ -76,7 +76,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hours", type=float, default=1.0,
                    help="this session's time budget in hours: it ends at the last epoch that fits (0: off); the schedule "
                         "is --epochs, continued by --resume")
-    p.add_argument("--batch", type=int, default=16)
+    p.add_argument("--batch", type=int, default=None,
+                   help="images a batch (default 16; with --resume: the saved run's, or this one, e.g. 64 on a GPU: "
+                        "gradients are accumulated to 64 images a step either way)")
     p.add_argument("--lr0", type=float, default=None,
                    help="initial learning rate (default: ultralytics' choice for the optimizer); low to refine a model")
     p.add_argument("--warmup-epochs", type=float, default=None,
@@ -87,6 +89,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="stop after this many epochs without a better val mAP (default 15; with --resume: the saved "
                         "run's, or this to change it)")
     p.add_argument("--workers", type=int, default=2, help="data loader processes")
+    p.add_argument("--device", default="cpu",
+                   help="torch device: cpu (default) or a CUDA device index such as 0 (the [train] extra's torch "
+                        "runs there unchanged; the run's schedule, data and checkpoint are the same)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--close-mosaic", type=int, default=10, help="last epochs trained without mosaic augmentation")
     p.add_argument("--no-cache", action="store_true", help="don't cache the decoded images in RAM")
@@ -99,6 +104,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="continue the run saved in --checkpoint (optimizer, LR schedule, epoch counter)")
     p.add_argument("--checkpoint", type=Path, default=None,
                    help="resumable checkpoint written every epoch (default: assets/models/detector-train.pt)")
+    p.add_argument("--fit-schedule", action="store_true",
+                   help="with --resume and --hours: after this session's first epoch, move the schedule's end to the "
+                        "last epoch the budget holds, so the learning rate anneals fully within it (a lent machine)")
     p.add_argument("--session-epochs", type=int, default=None,
                    help="end this session after this many epochs (the run's schedule is kept; continue with --resume)")
     p.add_argument("--optimize", type=Path, default=None, metavar="FLOAT_ONNX",
@@ -134,6 +142,17 @@ def run(args: argparse.Namespace) -> int:
         if not args.init_onnx.is_file():
             print(f"ocslam: error: --init-onnx: no ONNX model at {args.init_onnx}", file=sys.stderr)
             return 2
+    if args.device != "cpu" and not all(part.isdigit() for part in args.device.split(",")):
+        print(f"ocslam: error: --device must be cpu or CUDA device indices such as 0 or 0,1 (got {args.device!r})",
+              file=sys.stderr)
+        return 2
+    if args.batch is not None and args.batch < 1:
+        print("ocslam: error: --batch must be at least 1", file=sys.stderr)
+        return 2
+    if args.fit_schedule and not (args.resume and args.hours):
+        print("ocslam: error: --fit-schedule needs --resume and --hours (it fits a saved run's schedule to a budget)",
+              file=sys.stderr)
+        return 2
     datasets = list(args.data or [Path("datasets/sim")])
     bad = [str(d) for d in datasets if len(datasets) > 1 and not ((d / "data.yaml").is_file() or d.is_file())]
     if bad:
@@ -158,7 +177,8 @@ def run(args: argparse.Namespace) -> int:
         imgsz=args.imgsz,
         epochs=args.epochs if args.epochs is not None else (0 if args.resume else 60),
         hours=args.hours or None,
-        batch=args.batch,
+        batch=args.batch if args.batch is not None and not args.resume else 16,
+        resume_batch=args.batch if args.resume else None,
         patience=args.patience,
         workers=args.workers,
         seed=args.seed,
@@ -167,6 +187,8 @@ def run(args: argparse.Namespace) -> int:
         name=args.name,
         init_weights=args.init_weights,
         resume=args.resume,
+        device=args.device,
+        fit_schedule=args.fit_schedule,
     )
     from app.config import PROJECT_ROOT
 

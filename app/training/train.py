@@ -53,6 +53,7 @@ class TrainOptions:
     epochs: int = 60
     hours: float | None = 1.0
     batch: int = 16
+    resume_batch: int | None = None  # with resume: a new batch size (ultralytics accumulates to nbs=64 either way)
     patience: int | None = None  # None: DEFAULT_PATIENCE for a new run, the saved run's on --resume
     workers: int = 2
     seed: int = 0
@@ -69,6 +70,8 @@ class TrainOptions:
     checkpoint: Path | None = None  # resumable copy of every epoch's last.pt (the command: assets/models/detector-train.pt)
     session_epochs: int | None = None  # stop this session after this many epochs (the schedule stays the run's)
     extra: dict[str, Any] = field(default_factory=dict)  # further ultralytics train() arguments
+    fit_schedule: bool = False  # with resume + hours: end the schedule at the last epoch the budget holds
+    device: str = "cpu"  # torch device: "cpu" or a CUDA index ("0"); the schedule and the data do not depend on it
 
 
 @dataclass
@@ -115,7 +118,7 @@ def _resume_checkpoint(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> P
         ckpt["best_fitness"], ckpt["stopper"] = None, None
     save_dir = runs_dir / opts.name
     ta.update(data=str(data_yaml.resolve()), project=str(runs_dir), name=opts.name, save_dir=str(save_dir),
-              exist_ok=True, device="cpu", workers=opts.workers, cache=opts.cache, time=None, plots=False)
+              exist_ok=True, device=opts.device, workers=opts.workers, cache=opts.cache, time=None, plots=False)
     if opts.epochs and int(opts.epochs) > int(ta.get("epochs", 0)):
         ta["epochs"] = int(opts.epochs)
         # a stretched schedule raises the learning rate again, so the next epochs are worse for a while: early
@@ -123,6 +126,10 @@ def _resume_checkpoint(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> P
         ckpt["stopper"] = None
     if opts.patience is not None:
         ta["patience"] = int(opts.patience)
+    if opts.resume_batch is not None:
+        # the optimizer steps on a nominal batch of `nbs` images (gradients accumulated up to it), so a larger
+        # batch on a GPU keeps the run's step size and schedule; only BatchNorm sees other batch statistics
+        ta["batch"] = int(opts.resume_batch)
     ckpt["train_args"] = ta
     last = save_dir / "weights" / "last.pt"
     last.parent.mkdir(parents=True, exist_ok=True)
@@ -237,7 +244,6 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
     """Train, validate, export ONNX and write the model and its card. Returns where they went."""
     setup_offline(opts.config_dir)
     YOLO = _import_yolo()
-    import torch
 
     data_yaml = _data_yaml(opts.data)
     dataset_meta = yaml.safe_load(data_yaml.read_text()).get("ocslam", {})
@@ -251,11 +257,20 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
         args = _fresh_args(opts, data_yaml, runs_dir)
     _add_session_callbacks(model, opts, log)
     log(f"{'resuming' if opts.resume else 'training'} {opts.model} on {data_yaml} at {opts.imgsz} px "
-        f"(CPU, {torch.get_num_threads()} threads)")
+        f"({_device_text(opts.device)})")
     t0 = time.monotonic()
     model.train(**args)
     train_s = time.monotonic() - t0
     return _finish(model, opts, data_yaml, dataset_meta, train_s, log)
+
+
+def _device_text(device: str) -> str:
+    """The training device in words, for the log and the model card."""
+    import torch
+
+    if device != "cpu" and torch.cuda.is_available():
+        return f"cuda:{device} ({torch.cuda.get_device_name(int(device.split(',')[0]))}, {os.cpu_count()} CPU cores for data)"
+    return f"cpu ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, {torch.get_num_threads()} threads)"
 
 
 def _fresh_args(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> dict[str, Any]:
@@ -267,7 +282,7 @@ def _fresh_args(opts: TrainOptions, data_yaml: Path, runs_dir: Path) -> dict[str
         patience=DEFAULT_PATIENCE if opts.patience is None else int(opts.patience),
         workers=opts.workers,
         seed=opts.seed,
-        device="cpu",
+        device=opts.device,
         pretrained=False,
         plots=False,
         amp=False,
@@ -329,6 +344,20 @@ def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
     def on_fit_epoch_end(trainer) -> None:
         state["epochs"] += 1
         per_epoch = (time.monotonic() - t_start) / state["epochs"]
+        if opts.fit_schedule and opts.hours:
+            # a lease of fixed length (a lent GPU machine): after the first epoch, the schedule's end moves to the
+            # last epoch that fits, so its learning rate anneals fully within the lease (the linear LR curve reads
+            # trainer.epochs at every step); later epochs are timed like this one, data set-up excluded
+            per_epoch = max(float(getattr(trainer, "epoch_time", 0.0) or 0.0), 1e-3) * 1.05
+            if state["epochs"] == 1:
+                left = opts.hours * 3600 - (time.monotonic() - t_start)
+                end = trainer.epoch + 1 + max(int(left // per_epoch), 0)
+                if end != trainer.epochs:
+                    log(f"schedule fitted to the session's budget: {trainer.epochs} → {end} epochs "
+                        f"({per_epoch:.1f} s an epoch)")
+                    trainer.epochs = trainer.args.epochs = end
+                if end <= trainer.epoch + 1:
+                    trainer.stop = True
         st = getattr(trainer, "stopper", None)  # ultralytics' early stopping: no better epoch for `patience` epochs
         early = st is not None and bool(st.patience) and trainer.epoch + 1 - int(st.best_epoch) >= int(st.patience)
         if opts.session_epochs is not None and state["epochs"] >= opts.session_epochs:
@@ -340,6 +369,23 @@ def _add_session_callbacks(model: Any, opts: TrainOptions, log) -> None:
                    "with --resume --patience N)" if early else "the session's budget")
             log(f"session ends after epoch {trainer.epoch + 1} of {trainer.epochs} ({why}); continue with --resume")
 
+    def on_train_start(trainer) -> None:
+        # A resumed optimizer: torch casts the moment buffers (bfloat16 in the committed checkpoint) to their
+        # parameters' dtype and device, but leaves the step counters where the saved run kept them (the CPU)
+        # unless the *saved* groups were fused. CUDA's fused AdamW, which ultralytics picks on a GPU, refuses
+        # that mix; its multi-tensor path takes it, and the buffers are made to match here in any case.
+        opt = getattr(trainer, "optimizer", None)
+        if opt is None:
+            return
+        for p, st in opt.state.items():
+            for k, v in list(st.items()):
+                if k != "step" and hasattr(v, "is_floating_point") and v.is_floating_point():
+                    st[k] = v.to(device=p.device, dtype=p.dtype)
+        for g in opt.param_groups:
+            if g.get("fused"):
+                g["fused"] = False
+
+    model.add_callback("on_train_start", on_train_start)
     model.add_callback("on_model_save", on_model_save)
     model.add_callback("on_fit_epoch_end", on_fit_epoch_end)
 
@@ -421,7 +467,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             "epochs_max": int(getattr(trainer, "epochs", opts.epochs)),
             "best_epoch": int(best_row["epoch"]) if best_row else None,
             "imgsz": opts.imgsz,
-            "batch": opts.batch,
+            "batch": int(getattr(targs, "batch", None) or opts.batch),
             "patience": int(getattr(targs, "patience", None) or opts.patience or DEFAULT_PATIENCE),
             "overrides": dict(opts.extra) or None,
             "time_budget_h": opts.hours,
@@ -429,7 +475,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
             else (f"{project_relative(targs.pretrained)} (the run's start; resumed)" if opts.resume and isinstance(getattr(targs, "pretrained", None), str)
                   else "random (from the model yaml)"),
             "training_time_h": round(train_s / 3600.0, 3),
-            "device": f"cpu ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)",
+            "device": _device_text(opts.device),
             "torch": str(torch.__version__),
             "ultralytics": str(__import__("ultralytics").__version__),
         },

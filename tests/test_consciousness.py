@@ -64,7 +64,7 @@ def test_presence_sequence_pure():
 def test_presence_sequence_through_the_node(mode):
     ball = Cylinder(2.0, 0.05, 0.11, 0.0, 0.22)
     wall = Box(3.3, 0.0, 0.2, 6.0, 0.0, 0.0, 2.4)
-    c = make(mode)
+    c = make(mode, min_frames_for_presence=0)  # the paper's F (improved: tests/test_presence_frames.py)
     seq = []
     for i, T in enumerate(line(6)):
         scan = raycast([ball, wall], T, CAM)
@@ -80,7 +80,7 @@ def test_presence_sequence_through_the_node(mode):
 @pytest.mark.parametrize("mode", ["improved", "seed"])
 def test_stationary_robot_does_not_raise_presence(mode):
     ball = Cylinder(2.0, 0.0, 0.11, 0.0, 0.22)
-    c = make(mode, stationary_frame_s=0.0)
+    c = make(mode, stationary_frame_s=0.0, min_frames_for_presence=0)
     drive(c, [ball], [("ball", ball)], [Pose2()] * 6)
     (o,) = c.objects
     assert o.presence == pytest.approx(0.18)
@@ -88,7 +88,7 @@ def test_stationary_robot_does_not_raise_presence(mode):
 
 def test_stationary_robot_counts_a_frame_per_interval_in_improved_mode():
     ball = Cylinder(2.0, 0.0, 0.11, 0.0, 0.22)
-    c = make(stationary_frame_s=1.0)
+    c = make(stationary_frame_s=1.0, min_frames_for_presence=0)
     drive(c, [ball], [("ball", ball)], [Pose2()] * 11, dt=0.2)  # 2 s standing still
     (o,) = c.objects
     assert o.presence == pytest.approx(0.54)  # created, then one new frame per second

@@ -328,6 +328,12 @@ class ConsciousnessConfig:
     frames_for_presence: int = param(
         5, min=1, max=100, step=1, help="F: frames before an object counts as present (paper: 5)", live=True
     )
+    min_frames_for_presence: int = param(
+        4, min=0, max=100, step=1,
+        help="improved: an object passed quickly (a turn) is judged on the frames it could have been seen in (those "
+        "that boxed it and its clear misses), at least this many, instead of F (0 or ≥ F: always F, the paper)",
+        live=True,
+    )
     decay_rate_per_s: float = param(
         0.15, min=0.0, max=5.0, step=0.01, unit="1/s", help="improved: presence lost per second in view but unseen", live=True
     )

@@ -202,12 +202,34 @@ def _new_frame(t: Track, stamp: float, robot_moved: bool, cfg: ConsciousnessConf
     return robot_moved or (stamp - t.last_frame_stamp >= float(cfg.stationary_frame_s) > 0.0)
 
 
+def presence_frames(t: Track, cfg: ConsciousnessConfig) -> int:
+    """``F`` of the soft decision for ``t``'s next frame. The paper's ``F`` assumes an object stays in view for
+    at least ``F`` frames; one the robot turns past may be in view for two or three. With
+    ``min_frames_for_presence`` (improved mode), ``F`` is the frames it could have been seen in so far (those
+    that boxed it, this one included, and its clear misses), clipped to ``[min_frames_for_presence, F]``: an
+    object boxed in every frame it was in clear view reaches its confidence, one missed in clear view does not
+    (and the presence evidence, :func:`evidence_presence`, still asks for several boxes)."""
+    F = max(int(cfg.frames_for_presence), 1)
+    m = int(getattr(cfg, "min_frames_for_presence", 0))
+    if m <= 0 or m >= F:
+        return F
+    return int(min(F, max(m, t.frames + 1 + t.misses)))
+
+
+def _first_presence_frames(cfg: ConsciousnessConfig) -> int:
+    """:func:`presence_frames` for a new object (one frame, no misses): ``min_frames_for_presence`` or ``F``."""
+    F = max(int(cfg.frames_for_presence), 1)
+    m = int(getattr(cfg, "min_frames_for_presence", 0))
+    return F if m <= 0 or m >= F else m
+
+
 def credit_track(
     t: Track, sight: Sighting, box: int, stamp: float, robot_moved: bool, cfg: ConsciousnessConfig, known_free: FreeFn | None
 ) -> None:
     """A box that saw ``t`` without giving points: a presence frame and a bisector ray."""
     if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
-        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(sight.confidence, cfg), cfg.frames_for_presence)
+        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(sight.confidence, cfg),
+                                               presence_frames(t, cfg))
         t.last_frame_stamp = stamp
     t.evidence.add_ray(sight.apex, sight.direction, sight.weight, sight.kf, decay=float(cfg.rolling_average_weight))
     t.touched_stamp = stamp
@@ -245,7 +267,7 @@ def create_track(
     t = Track(
         id=track_id,
         label=cand.label,
-        presence=initial_presence(cand.confidence, cfg.frames_for_presence),
+        presence=initial_presence(cand.confidence, _first_presence_frames(cfg)),
         frames=1,
         confidence=cand.confidence,
         source=cand.source,
@@ -287,7 +309,8 @@ def update_track(
     if cand.source == "lidar_legs" or (cand.source == "lidar_island" and t.source == "ground_plane"):
         t.source = cand.source
     if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
-        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(cand.confidence, cfg), cfg.frames_for_presence)
+        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(cand.confidence, cfg),
+                                               presence_frames(t, cfg))
         t.last_frame_stamp = stamp
     t.touched_stamp = stamp
     t.saw(stamp, cand.area_index)

@@ -155,6 +155,8 @@ def area_candidate(
             if reason is None and pc.solid_fraction > 0.0 and not leg_like and not cut:
                 if _see_through(area, pc, r_front, beam_b, beam_r):
                     reason = "corner_see_through"
+                elif _narrower_than_class(b, pc, r_front, beam_b, beam_r):
+                    reason = "corner_narrow"
                 elif _grid_free(area, pc, r_front, T_map_scan, grid):
                     reason = "corner_free_space"
         if reason is not None:
@@ -282,6 +284,38 @@ def _see_through(area: BoundingArea, pc: ClassPrior, r_front: float, beam_b: Flo
         return False
     depth = (pc.width[2] + 0.1) if pc.on_wall else (pc.apparent_width_max + 0.1)
     return bool(np.mean(r > r_front + depth) > 0.5)
+
+def _narrower_than_class(b: FloatArray, pc: ClassPrior, r_front: float, beam_b: FloatArray, beam_r: FloatArray) -> bool:
+    """True if the LIDAR sees past *both* sides of an island where the narrowest instance of a solid class
+    would still block it: a stool's or a table's leg in the wedge of a far gnome's or flowers' box.
+
+    ``b``: the island's bearings about the apex. The class's narrowest side (``width[0]``, at least 0.6 of
+    its nominal) spans ``±w/2`` about the island's middle bearing at ``r_front``; on each side, the first
+    beam past the island within that span must end far behind it (more than the class's largest extent,
+    as :func:`_see_through`). A nearer return there hides what lies behind it, a return at the island's
+    range continues it, and a side with no beam in the span (far objects, coarse beams) cannot tell."""
+    if pc.legged or pc.on_wall or pc.solid_fraction <= 0.0 or len(b) == 0 or len(beam_b) == 0:
+        return False
+    w = max(pc.width[0], 0.6 * pc.width[1])
+    mid = float(b[0] + 0.5 * angle_wrap(np.float64(b[-1] - b[0]))) if len(b) == 1 else float(
+        np.arctan2(np.sin(b).mean(), np.cos(b).mean()))
+    off_isl = angle_wrap(b - mid)
+    half_isl = float(np.max(np.abs(off_isl)))
+    half_obj = 0.5 * w / max(r_front, 0.1)
+    if half_isl >= half_obj:
+        return False
+    off = angle_wrap(beam_b - mid)
+    depth = pc.apparent_width_max + 0.1
+    for side in (1.0, -1.0):
+        o = side * off
+        sel = (o > half_isl + 1e-9) & (o <= half_obj)
+        if not np.any(sel):
+            return False
+        first = int(np.flatnonzero(sel)[np.argmin(o[sel])])
+        if not beam_r[first] > r_front + depth:  # nearer (hiding) or at its range (continuing); inf: passes
+            return False
+    return True
+
 
 def _grid_free(
     area: BoundingArea, pc: ClassPrior, r_front: float, T_map_scan: Pose2, grid: OccupancyGrid | None

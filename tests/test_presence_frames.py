@@ -97,3 +97,20 @@ def test_presence_sequence_of_an_object_boxed_in_every_frame():
         (o,) = c.objects
         seq.append(round(o.presence, 6))
     assert seq == pytest.approx([0.3, 0.6, 1.8**3 / (1 + 1.8**3), 0.9, 0.9, 0.9], abs=1e-6)
+
+
+def test_judged_on_fewer_frames_the_mean_confidence_counts():
+    """Four frames, never missed (``F' = 4``): ``Y_c`` is the frames' mean, not the best box alone: 0.8375, where
+    the paper (``F = 5``, best box) gives 0.76 and the best box alone would give 0.95."""
+    cfg = ConsciousnessConfig()
+    confs = [0.95, 0.95, 0.95, 0.5]
+    t = create_track(0, _cand(confs[0]), 0.0, -1, cfg, None)
+    for i, c in enumerate(confs[1:], start=1):
+        update_track(t, _cand(c), 0.2 * i, -1, True, cfg, None)
+    assert t.presence == pytest.approx(sum(confs) / 4)
+    paper = ConsciousnessConfig()
+    paper.min_frames_for_presence = 0
+    tp = create_track(0, _cand(confs[0]), 0.0, -1, paper, None)
+    for i, c in enumerate(confs[1:], start=1):
+        update_track(tp, _cand(c), 0.2 * i, -1, True, paper, None)
+    assert tp.presence == pytest.approx(0.95 * 4 / 5)

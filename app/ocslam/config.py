@@ -330,8 +330,9 @@ class ConsciousnessConfig:
     )
     min_frames_for_presence: int = param(
         4, min=0, max=100, step=1,
-        help="improved: an object passed quickly (a turn) is judged on the frames it could have been seen in (those "
-        "that boxed it and its clear misses), at least this many, instead of F (0 or ≥ F: always F, the paper)",
+        help="improved: an object passed quickly (a turn) is also judged on the frames it could have been seen in "
+        "(those that boxed it and its clear misses), at least this many, with their mean confidence, instead of F "
+        "(0 or ≥ F: always F, the paper)",
         live=True,
     )
     decay_rate_per_s: float = param(

@@ -216,6 +216,20 @@ def presence_frames(t: Track, cfg: ConsciousnessConfig) -> int:
     return int(min(F, max(m, t.frames + 1 + t.misses)))
 
 
+def _soft_decision(t: Track, confidence: float, cfg: ConsciousnessConfig) -> tuple[float, int]:
+    """The soft decision for ``t``'s new frame with a box of ``confidence``: ``(presence, frames)``. The paper's
+    ``Y_c·f/F``, or, judged on the fewer frames it could have been seen in (:func:`presence_frames`), ``Y_c·f/F'``
+    with ``Y_c`` the mean of its frames' confidences (thinner evidence: no single good box carries it),
+    whichever is higher."""
+    yc = t.frame_confidence(confidence, cfg)
+    F = max(int(cfg.frames_for_presence), 1)
+    p, f = update_presence(t.presence, t.frames, yc, F)
+    Fe = presence_frames(t, cfg)
+    if Fe < F and t.conf_n > 0:
+        p = max(p, update_presence(t.presence, t.frames, min(yc, t.conf_sum / t.conf_n), Fe)[0])
+    return p, f
+
+
 def _first_presence_frames(cfg: ConsciousnessConfig) -> int:
     """:func:`presence_frames` for a new object (one frame, no misses): ``min_frames_for_presence`` or ``F``."""
     F = max(int(cfg.frames_for_presence), 1)
@@ -228,8 +242,7 @@ def credit_track(
 ) -> None:
     """A box that saw ``t`` without giving points: a presence frame and a bisector ray."""
     if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
-        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(sight.confidence, cfg),
-                                               presence_frames(t, cfg))
+        t.presence, t.frames = _soft_decision(t, sight.confidence, cfg)
         t.last_frame_stamp = stamp
     t.evidence.add_ray(sight.apex, sight.direction, sight.weight, sight.kf, decay=float(cfg.rolling_average_weight))
     t.touched_stamp = stamp
@@ -309,8 +322,7 @@ def update_track(
     if cand.source == "lidar_legs" or (cand.source == "lidar_island" and t.source == "ground_plane"):
         t.source = cand.source
     if _new_frame(t, stamp, robot_moved, cfg) and t.touched_stamp != stamp:
-        t.presence, t.frames = update_presence(t.presence, t.frames, t.frame_confidence(cand.confidence, cfg),
-                                               presence_frames(t, cfg))
+        t.presence, t.frames = _soft_decision(t, cand.confidence, cfg)
         t.last_frame_stamp = stamp
     t.touched_stamp = stamp
     t.saw(stamp, cand.area_index)

@@ -17,7 +17,8 @@ Per frame (improved):
    range against the box's pixel size for the class's physical size (``corner_size``/``size_far``),
    whether the box reaches down to the island's row at the LIDAR's height (``corner_height``), and
    free space where a solid object of the class would have to be, in the current scan
-   (``corner_see_through``) and in the occupancy grid (``corner_free_space``).
+   (``corner_see_through``) and in the occupancy grid (``corner_free_space``), or past both sides of an island
+   narrower than any instance of the class (``corner_narrow``).
 5. The passing island nearest the bisector (angular distance, ties to the nearer) is the object;
    for legged classes the other leg-sized islands that fit the class's footprint join it (*legs*).
 6. No consistent island: classes that can be below the LIDAR plane are placed by ground-plane

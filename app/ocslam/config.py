@@ -416,7 +416,7 @@ class ConsciousnessConfig:
         live=True,
     )
     ray_centre_sigma_m: float = param(
-        0.1, min=0.0, max=1.0, step=0.01, unit="m",
+        0.05, min=0.0, max=1.0, step=0.01, unit="m",
         help="improved: where an object's bisector rays fix its centre to this (their residual over their spread of "
         "directions), points beyond the object's reach of that centre do not shape it (a stool behind a round table, "
         "a box beside a shelf; 0: off)",

@@ -285,6 +285,7 @@ def _see_through(area: BoundingArea, pc: ClassPrior, r_front: float, beam_b: Flo
     depth = (pc.width[2] + 0.1) if pc.on_wall else (pc.apparent_width_max + 0.1)
     return bool(np.mean(r > r_front + depth) > 0.5)
 
+
 def _narrower_than_class(b: FloatArray, pc: ClassPrior, r_front: float, beam_b: FloatArray, beam_r: FloatArray) -> bool:
     """True if the LIDAR sees past *both* sides of an island where the narrowest instance of a solid class
     would still block it: a stool's or a table's leg in the wedge of a far gnome's or flowers' box.
@@ -297,8 +298,7 @@ def _narrower_than_class(b: FloatArray, pc: ClassPrior, r_front: float, beam_b: 
     if pc.legged or pc.on_wall or pc.solid_fraction <= 0.0 or len(b) == 0 or len(beam_b) == 0:
         return False
     w = max(pc.width[0], 0.6 * pc.width[1])
-    mid = float(b[0] + 0.5 * angle_wrap(np.float64(b[-1] - b[0]))) if len(b) == 1 else float(
-        np.arctan2(np.sin(b).mean(), np.cos(b).mean()))
+    mid = float(np.arctan2(np.sin(b).mean(), np.cos(b).mean()))
     off_isl = angle_wrap(b - mid)
     half_isl = float(np.max(np.abs(off_isl)))
     half_obj = 0.5 * w / max(r_front, 0.1)

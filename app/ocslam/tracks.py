@@ -202,6 +202,16 @@ def _new_frame(t: Track, stamp: float, robot_moved: bool, cfg: ConsciousnessConf
     return robot_moved or (stamp - t.last_frame_stamp >= float(cfg.stationary_frame_s) > 0.0)
 
 
+def _frames_window(cfg: ConsciousnessConfig, could_see: int) -> int:
+    """``F`` of the soft decision for an object that could have been seen in ``could_see`` frames: the paper's
+    ``F``, or with ``min_frames_for_presence`` (improved mode) ``could_see`` clipped to ``[min, F]``."""
+    F = max(int(cfg.frames_for_presence), 1)
+    m = int(cfg.min_frames_for_presence)
+    if m <= 0 or m >= F:
+        return F
+    return min(F, max(m, int(could_see)))
+
+
 def presence_frames(t: Track, cfg: ConsciousnessConfig) -> int:
     """``F`` of the soft decision for ``t``'s next frame. The paper's ``F`` assumes an object stays in view for
     at least ``F`` frames; one the robot turns past may be in view for two or three. With
@@ -209,11 +219,7 @@ def presence_frames(t: Track, cfg: ConsciousnessConfig) -> int:
     that boxed it, this one included, and its clear misses), clipped to ``[min_frames_for_presence, F]``: an
     object boxed in every frame it was in clear view reaches its confidence, one missed in clear view does not
     (and the presence evidence, :func:`evidence_presence`, still asks for several boxes)."""
-    F = max(int(cfg.frames_for_presence), 1)
-    m = int(getattr(cfg, "min_frames_for_presence", 0))
-    if m <= 0 or m >= F:
-        return F
-    return int(min(F, max(m, t.frames + 1 + t.misses)))
+    return _frames_window(cfg, t.frames + 1 + t.misses)
 
 
 def _soft_decision(t: Track, confidence: float, cfg: ConsciousnessConfig) -> tuple[float, int]:
@@ -228,13 +234,6 @@ def _soft_decision(t: Track, confidence: float, cfg: ConsciousnessConfig) -> tup
     if Fe < F and t.conf_n > 0:
         p = max(p, update_presence(t.presence, t.frames, min(yc, t.conf_sum / t.conf_n), Fe)[0])
     return p, f
-
-
-def _first_presence_frames(cfg: ConsciousnessConfig) -> int:
-    """:func:`presence_frames` for a new object (one frame, no misses): ``min_frames_for_presence`` or ``F``."""
-    F = max(int(cfg.frames_for_presence), 1)
-    m = int(getattr(cfg, "min_frames_for_presence", 0))
-    return F if m <= 0 or m >= F else m
 
 
 def credit_track(
@@ -280,7 +279,7 @@ def create_track(
     t = Track(
         id=track_id,
         label=cand.label,
-        presence=initial_presence(cand.confidence, _first_presence_frames(cfg)),
+        presence=initial_presence(cand.confidence, _frames_window(cfg, 1)),
         frames=1,
         confidence=cand.confidence,
         source=cand.source,

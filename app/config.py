@@ -114,6 +114,10 @@ class SimConfig:
         "auto", choices=("auto", "egl", "tiny"),
         help="camera renderer: auto = pybullet's EGL plugin (Mesa llvmpipe) where it loads, else TinyRenderer",
     )
+    egl_shadow_map: bool = param(
+        False, help="EGL renderer: draw pybullet's shadow-map pass before each frame (two thirds of a frame on"
+                    " llvmpipe); off: no cast shadows or specular highlights, as in TinyRenderer's shadow=0",
+    )
     parallel_stages: bool = param(
         True, help="run the detector, SLAM and the consciousness on threads overlapping physics, LIDAR and rendering"
                    " (results tied to sensor stamps: the same run as without)",

@@ -61,6 +61,7 @@ from app.ocslam.se2 import Pose2, wrap_angle
 from app.sim.building import FAR_AWAY, build_bodies
 from app.sim.camera import Camera, CameraFrame, PixelNoise, camera_size
 from app.sim.drive import CollisionProbe, KinematicDrive
+from app.sim.egl_shadow import shadow_map_switch
 from app.sim.ground_truth import ground_truth_objects, ground_truth_obstacles
 from app.sim.lidar import Lidar, PlanarCaster
 from app.sim.renderer import (
@@ -71,6 +72,7 @@ from app.sim.renderer import (
     RENDERERS,
     RendererError,
     egl_mesh_alias,
+    egl_plugin_path,
     load_egl_plugin,
     probe_egl,
     quiet_c_stdout,
@@ -146,7 +148,18 @@ class SimWorld:
         self._probe = CollisionProbe(p, self.client, bodies.probe, z=bodies.probe_z, radius=bodies.robot_radius,
                                      sim_config=config.sim, world_bodies=bodies.world_bodies)
         self._lidar = Lidar(p, self.client, bodies.world_bodies)
-        self._camera = Camera(p, self.client, renderer=self.renderer, seg_lut=bodies.seg_lut, gl_thread=self._gl_thread)
+        # the EGL plugin's shadow-map pass (app/sim/egl_shadow.py): two thirds of a frame on llvmpipe
+        shadow_map = bool(getattr(config.sim, "egl_shadow_map", False))
+        shadow_switch = None
+        if self.renderer == "egl":
+            shadow_switch, why = shadow_map_switch(egl_plugin_path())
+            if shadow_switch is None and not shadow_map:
+                log.warning("the EGL plugin's shadow map cannot be switched off: %s", why)
+                self.renderer_note += f", shadow map (cannot be switched off: {why})"
+            else:
+                self.renderer_note += ", shadow map" if shadow_map else ", no shadow map"
+        self._camera = Camera(p, self.client, renderer=self.renderer, seg_lut=bodies.seg_lut, gl_thread=self._gl_thread,
+                              shadow_switch=shadow_switch, shadow_map=shadow_map)
         self._robot_synced = False
         self.reset()
 

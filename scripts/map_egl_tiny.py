@@ -1,8 +1,10 @@
 """mAP of the committed detector on EGL vs TinyRenderer renders of the same scenes (same poses), with
 app/bench/detector.py's machinery (Sample, GtBox, run_detector, coco_evaluate). Ground truth from each
-render's own segmentation (objects >= 400 px at 640x480; smaller ones are ignore regions).
+render's own segmentation (objects >= 400 px at 640x480, the same share of the image at other sizes;
+smaller ones are ignore regions). Three renders of each pose: TinyRenderer, EGL with pybullet's
+shadow-map pass (``sim.egl_shadow_map = true``) and EGL without it (the default).
 
-    python scripts/map_egl_tiny.py [POSES_PER_WORLD=20] [RANDOM_WORLDS=3]   # JSON on stdout (docs/benchmarks.md)
+    python scripts/map_egl_tiny.py [POSES_PER_WORLD=20] [RANDOM_WORLDS=3] [WxH=640x480]   # JSON on stdout
 """
 import json
 import math
@@ -22,16 +24,18 @@ from app.training.samples import GtBox, Sample
 from app.world.format import load_world
 from app.world.generator import random_world
 
-W, H = 640, 480
 PER_WORLD = int(sys.argv[1]) if len(sys.argv) > 1 else 20
 N_RANDOM = int(sys.argv[2]) if len(sys.argv) > 2 else 3
+W, H = (int(v) for v in (sys.argv[3] if len(sys.argv) > 3 else "640x480").split("x"))
+MIN_PX = 400 * W * H / (640 * 480)
+VARIANTS = {"tiny": ("tiny", True), "egl_shadow_map": ("egl", True), "egl": ("egl", False)}  # renderer, shadow map
 cfg = Config.load(None, ["camera.noise_std=0"])
 worlds = [load_world(resolve_path(cfg.sim.world))] + [random_world(99000 + i) for i in range(N_RANDOM)]
-samples = {"tiny": [], "egl": []}
+samples: dict = {k: [] for k in VARIANTS}
 t0 = time.time()
 for wi, world in enumerate(worlds):
     rng = np.random.default_rng(1234 + wi)
-    sims = {r: SimWorld(world, cfg, seed=0, renderer=r) for r in ("tiny", "egl")}
+    sims = {r: SimWorld(world, cfg, seed=0, renderer=r) for r in ("tiny", "egl")}  # one EGL client per process
     ref = sims["tiny"]
     xmin, ymin, xmax, ymax = world.bounds()
     k = tries = 0
@@ -46,12 +50,14 @@ for wi, world in enumerate(worlds):
             continue
         yaw = math.atan2(o.y - y, o.x - x) + rng.uniform(-0.35, 0.35)
         T = Pose2(x, y, yaw)
-        for r, sim in sims.items():
+        for r, (renderer, shadow) in VARIANTS.items():
+            sim = sims[renderer]
+            sim._camera.shadow_map = shadow
             f = sim.render_view(T, width=W, height=H, segmentation=True)
             boxes = []
             for oid, (x1, y1, x2, y2, n) in visible_boxes(f.segmentation).items():
                 if 0 <= oid < len(world.objects):
-                    boxes.append(GtBox(CLASS_INDEX[world.objects[oid].label], x1, y1, x2, y2, ignore=n < 400))
+                    boxes.append(GtBox(CLASS_INDEX[world.objects[oid].label], x1, y1, x2, y2, ignore=n < MIN_PX))
             samples[r].append(Sample(None, W, H, tuple(boxes), rgb=f.image.data))
         k += 1
     for s in sims.values():

@@ -47,6 +47,7 @@ def test_auto_is_egl_where_it_loads():
     pipe = _pipe("sim.renderer=auto", "detector.kind=oracle")
     try:
         assert pipe.summary()["renderer"] == "egl"
+        assert pipe.summary()["renderer_note"].endswith("no shadow map")  # the render process's (sim.egl_shadow_map)
         assert pipe.sim.render_camera(160, 120).image.data.std() > 0
     finally:
         pipe.close()

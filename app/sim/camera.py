@@ -54,11 +54,16 @@ class Camera:
 
     ``seg_lut``: body id → ground-truth object id (-1 otherwise). ``gl_thread``: the thread that holds
     the EGL context (None for TinyRenderer): a render from any other thread is refused with
-    :class:`RendererError` (it would crash the process).
+    :class:`RendererError` (it would crash the process). ``shadow_switch``
+    (:class:`~app.sim.egl_shadow.ShadowMapSwitch`, EGL only) is set to ``shadow_map`` before each frame
+    (the plugin's flag is per process, and other clients may want the other setting).
     """
 
-    def __init__(self, p: Any, client: int, *, renderer: str, seg_lut: NDArray[np.int32], gl_thread: int | None) -> None:
+    def __init__(self, p: Any, client: int, *, renderer: str, seg_lut: NDArray[np.int32], gl_thread: int | None,
+                 shadow_switch: Any = None, shadow_map: bool = True) -> None:
         self._p = p
+        self.shadow_switch = shadow_switch
+        self.shadow_map = shadow_map
         self.client = client
         self.renderer = renderer
         self.renderer_flag = p.ER_BULLET_HARDWARE_OPENGL if renderer == "egl" else p.ER_TINY_RENDERER
@@ -109,6 +114,8 @@ class Camera:
         if light:
             kw.update(light)
         flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
+        if self.shadow_switch is not None:
+            self.shadow_switch.set(self.shadow_map)
         with quiet_c_stdout() if self.renderer == "egl" else contextlib.nullcontext():
             _, _, rgba, zbuf, seg = p.getCameraImage(
                 width, height, view, proj, renderer=self.renderer_flag, flags=flags, physicsClientId=cid, **kw

@@ -28,33 +28,49 @@ __all__ = ["Planner", "grid_path"]
 def grid_path(
     free: NDArray[np.bool_], a: tuple[int, int], b: tuple[int, int], cost: NDArray[np.float64] | None = None
 ) -> list[tuple[int, int]] | None:
-    """8-connected A* on a boolean grid (row, col); ``cost`` (≥ 1) multiplies the step length."""
+    """8-connected A* on a boolean grid (row, col); ``cost`` (≥ 1) multiplies the step length.
+
+    Cells are flat indices ``r·W + c`` on Python lists (the heap breaks ties of equal ``f`` by that index,
+    i.e. by ``(r, c)``), and an entry whose cell has since been reached more cheaply is skipped (that cell was
+    expanded with its better ``g`` first; expanding it again could not improve a neighbour): the path is the
+    one a tuple-keyed A* returns, faster."""
     H, W = free.shape
     if not (free[a] and free[b]):
         return None
-    openq = [(0.0, a)]
-    came: dict[tuple[int, int], tuple[int, int]] = {}
-    g = {a: 0.0}
+    ok = free.ravel().tolist()
+    step_cost = None if cost is None else np.asarray(cost, dtype=np.float64).ravel().tolist()
+    br, bc = b
+    goal = br * W + bc
+    start = a[0] * W + a[1]
+    g: dict[int, float] = {start: 0.0}
+    came: dict[int, int] = {}
+    openq: list[tuple[float, int]] = [(0.0, start)]
     steps = [(-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0), (-1, -1, 1.414), (-1, 1, 1.414), (1, -1, 1.414), (1, 1, 1.414)]
+    hypot, heappush, heappop = math.hypot, heapq.heappush, heapq.heappop
     while openq:
-        _, cur = heapq.heappop(openq)
-        if cur == b:
-            path = [cur]
+        f, cur = heappop(openq)
+        if cur == goal:
+            path = [(cur // W, cur % W)]
             while cur in came:
                 cur = came[cur]
-                path.append(cur)
+                path.append((cur // W, cur % W))
             return path[::-1]
+        r, c = divmod(cur, W)
+        gc = g[cur]
+        if f > gc + hypot(r - br, c - bc):  # a stale entry
+            continue
         for dr, dc, step in steps:
-            nr, nc = cur[0] + dr, cur[1] + dc
-            if 0 <= nr < H and 0 <= nc < W and free[nr, nc]:
-                if dr and dc and not (free[cur[0] + dr, cur[1]] and free[cur[0], cur[1] + dc]):
-                    continue
-                ng = g[cur] + step * (1.0 if cost is None else float(cost[nr, nc]))
-                if ng < g.get((nr, nc), 1e18):
-                    g[(nr, nc)] = ng
-                    came[(nr, nc)] = cur
-                    h = math.hypot(nr - b[0], nc - b[1])
-                    heapq.heappush(openq, (ng + h, (nr, nc)))
+            nr, nc = r + dr, c + dc
+            if not (0 <= nr < H and 0 <= nc < W):
+                continue
+            n = cur + dr * W + dc
+            if not ok[n] or (dr and dc and not (ok[cur + dr * W] and ok[cur + dc])):
+                continue
+            ng = gc + step * (1.0 if step_cost is None else step_cost[n])
+            if ng < g.get(n, 1e18):
+                g[n] = ng
+                came[n] = cur
+                heappush(openq, (ng + hypot(nr - br, nc - bc), n))
     return None
 
 

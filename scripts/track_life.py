@@ -1,0 +1,89 @@
+"""The life of one tracked object in a cached sweep trace: its state after every frame that had it, the frame's
+boxes, and the ground truth near where it ended (dev worlds only: looking at a test world's objects is tuning
+on it).
+
+    python scripts/profile_traces.py --suite zoo-dev --misses          # find a false positive's id (#N)
+    python scripts/track_life.py runs/sweep-cache/<world>-<key>/trace-<h>.pkl N [--set SECTION.KEY=VALUE ...]
+
+Each row: stamp, ``T_map_base``, presence, soft-decision frames, boxed frames, clear misses, footprint centre and
+size (the trace's map frame: start-relative), whether this frame updated it and with which box (its index in the
+frame's boxes), then the frame's boxes ``(class, confidence, x1, x2)`` at the detector threshold.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pickle
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def main() -> int:
+    from app.config import Config
+    from app.ocslam.consciousness import Consciousness
+    from app.ocslam.detector import score_calibration_for
+    from app.sweep.trace import Correction, filter_detections
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("trace", help="a trace pickle (runs/sweep-cache/*/trace-*.pkl)")
+    ap.add_argument("track", type=int, help="the track's id (the #N of profile_traces.py --misses)")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    ap.add_argument("--near", type=float, default=1.5, help="list ground-truth objects this close to its end (m)")
+    a = ap.parse_args()
+    with open(a.trace, "rb") as fh:
+        tr = pickle.load(fh)
+    cfg = Config()
+    detector = "yolo"
+    try:
+        import json
+
+        detector = json.loads((Path(a.trace).parent / "recording.json").read_text()).get("detector", "yolo")
+    except (OSError, ValueError):
+        pass
+    cfg.set("detector.kind", "oracle" if detector == "oracle" else "yolo")
+    for s in a.set:
+        k, _, v = s.partition("=")
+        cfg.set(k, v)
+    cons = Consciousness(cfg.consciousness, tr.camera_model, score_calibration_for(cfg.detector))
+    conf = float(cfg.detector.confidence)
+    last = None
+    for ev in tr.events:
+        if isinstance(ev, Correction):
+            cons.apply_correction(ev.pose)
+            print(f"        loop-closure correction {ev.pose}")
+            continue
+        grid = None
+        if cfg.consciousness.corner_check and ev.grid is not None:
+            if last is None or not last[0].same_cells(ev.grid):
+                last = (ev.grid, ev.grid.grid())
+            grid = replace(last[1], stamp=ev.grid.stamp)
+        dets = filter_detections(ev.detections, conf)
+        cons.update(dets, ev.scan, ev.T_map_base, stamp=ev.stamp, grid=grid, keyframe=ev.keyframe, robot_moved=ev.robot_moved)
+        t = next((t for t in cons._tracks if t.id == a.track), None)
+        if t is None or t.footprint is None:
+            continue
+        T, fp = ev.T_map_base, t.footprint
+        box = t.boxes.get(ev.stamp)
+        boxes = [(b.label, round(b.confidence, 2), int(b.x1), int(b.x2)) for b in dets.boxes]
+        print(f"{ev.stamp:8.2f} T=({T.x:5.2f},{T.y:5.2f},{T.yaw:5.2f}) p={t.presence:.2f} f={t.frames} boxed={t.detections} "
+              f"missed={t.misses} c=({fp.center[0]:.2f},{fp.center[1]:.2f}) {fp.size_x:.2f}×{fp.size_y:.2f} "
+              f"{'box ' + str(box) if box is not None else '-'} {boxes}")
+    o = next((o for o in cons.objects if o.id == a.track), None)
+    if o is None:
+        print(f"track {a.track} is not in the final map")
+        return 1
+    print(f"final: {o.label} at ({o.pose.x:.2f}, {o.pose.y:.2f}) presence {o.presence:.2f} (trace frame)")
+    for g in tr.truth:
+        d = math.hypot(g.pose.x - o.pose.x, g.pose.y - o.pose.y)
+        if d < a.near:
+            print(f"  truth {g.label:12s} ({g.pose.x:.2f}, {g.pose.y:.2f}) {d:.2f} m")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

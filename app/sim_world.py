@@ -389,6 +389,8 @@ class SimWorld:
     def close(self) -> None:
         """Disconnect the pybullet client (idempotent)."""
         if getattr(self, "client", -1) >= 0:
+            if getattr(self, "_camera", None) is not None:
+                self._camera.shadow_switch = None  # the plugin may be unloaded with this client: its flag with it
             try:
                 with quiet_c_stdout() if getattr(self, "renderer", "tiny") == "egl" else contextlib.nullcontext():
                     self._p.disconnect(self.client)

@@ -62,3 +62,23 @@ def test_without_the_shadow_map_the_frame_shows_the_same_objects_without_cast_sh
     assert np.count_nonzero(a.segmentation == 0) > 200
     diff = np.abs(a.image.data.astype(int) - b.image.data.astype(int)).max(axis=2)
     assert np.count_nonzero(diff > 8) > 100, "the shadow-map pass made no difference: the switch did nothing"
+
+
+def test_worlds_built_one_after_another_each_find_the_flag_where_the_plugin_is_now():
+    """Closing the last EGL world unloads the plugin; the next load may map it elsewhere. Each world asks for
+    the flag's address after its own load and a closed world forgets it (a stale address crashed the suite)."""
+    ok, why = probe_egl()
+    if not ok:
+        pytest.skip(f"EGL cannot load here: {why}")
+    cfg = quiet_config(**{"camera.noise_std": 0.0})
+    for _ in range(3):
+        sim = SimWorld(box_room(objects=[WorldObject(label="ball", model="soccer_ball", x=1.2, y=0.0, yaw=0.0)]), cfg,
+                       seed=0, renderer="egl")
+        cam = sim._camera
+        assert cam.shadow_switch is not None
+        for shadow in (True, False):
+            cam.shadow_map = shadow
+            assert sim.render_camera(64, 48).image.data.std() > 0
+            assert cam.shadow_switch.enabled is shadow
+        sim.close()
+        assert cam.shadow_switch is None

@@ -102,19 +102,17 @@ class ShadowMapSwitch:
         return bool(self._flag.value)
 
 
-_switches: dict[str, ShadowMapSwitch] = {}
-
-
 def shadow_map_switch(plugin_path: str | None) -> tuple[ShadowMapSwitch | None, str]:
     """The shadow-map switch of the EGL plugin loaded in this process from ``plugin_path``, or None and
-    why not (the plugin is then left as it is)."""
+    why not (the plugin is then left as it is). The address holds while the plugin stays loaded: ask for
+    the switch after loading the plugin into a client and use it only while that client is connected (when
+    the last client that loaded it disconnects, the plugin is unloaded and a later load may map it
+    elsewhere)."""
     if not sys.platform.startswith("linux"):
         return None, "not Linux"
     if not plugin_path:
         return None, "no EGL plugin"
     real = os.path.realpath(plugin_path)
-    if real in _switches:
-        return _switches[real], ""
     sym = elf_symbol(real, SHADOW_FLAG_SYMBOL)
     if sym is None or sym[1] != 1:
         return None, f"the plugin names no one-byte {SHADOW_FLAG_SYMBOL}"
@@ -131,5 +129,4 @@ def shadow_map_switch(plugin_path: str | None) -> tuple[ShadowMapSwitch | None, 
     value = ctypes.c_uint8.from_address(addr).value
     if value not in (0, 1):
         return None, f"{SHADOW_FLAG_SYMBOL} holds {value}, not a boolean"
-    _switches[real] = ShadowMapSwitch(addr)
-    return _switches[real], ""
+    return ShadowMapSwitch(addr), ""

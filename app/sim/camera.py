@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.ocslam.messages import CameraInfo, Image
+from app.sim.egl_shadow import ShadowMapSwitch
 from app.sim.renderer import RendererError, quiet_c_stdout
 
 __all__ = ["Camera", "CameraFrame", "PixelNoise", "camera_size"]
@@ -60,7 +61,7 @@ class Camera:
     """
 
     def __init__(self, p: Any, client: int, *, renderer: str, seg_lut: NDArray[np.int32], gl_thread: int | None,
-                 shadow_switch: Any = None, shadow_map: bool = True) -> None:
+                 shadow_switch: ShadowMapSwitch | None = None, shadow_map: bool = True) -> None:
         self._p = p
         self.shadow_switch = shadow_switch
         self.shadow_map = shadow_map

@@ -55,7 +55,7 @@ def main() -> int:
     for ev in tr.events:
         if isinstance(ev, Correction):
             cons.apply_correction(ev.pose)
-            print(f"        loop-closure correction {ev.pose}")
+            print("        loop-closure correction")
             continue
         grid = None
         if cfg.consciousness.corner_check and ev.grid is not None:

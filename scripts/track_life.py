@@ -4,6 +4,8 @@ on it).
 
     python scripts/profile_traces.py --suite zoo-dev --misses          # find a false positive's id (#N)
     python scripts/track_life.py runs/sweep-cache/<world>-<key>/trace-<h>.pkl N [--set SECTION.KEY=VALUE ...]
+    python scripts/track_life.py TRACE 0 --at 1.64,3.79   # which tracks ever stood near a missed object, then
+                                                          # the life of track N (-1: none)
 
 Each row: stamp, ``T_map_base``, presence, soft-decision frames, boxed frames, clear misses, footprint centre and
 size (the trace's map frame: start-relative), whether this frame updated it and with which box (its index in the
@@ -34,6 +36,8 @@ def main() -> int:
     ap.add_argument("track", type=int, help="the track's id (the #N of profile_traces.py --misses)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     ap.add_argument("--near", type=float, default=1.5, help="list ground-truth objects this close to its end (m)")
+    ap.add_argument("--at", default=None, metavar="X,Y", help="also list every track that came within 0.5 m of X,Y "
+                    "(trace frame), with its class, closest approach and whether it is in the final map")
     a = ap.parse_args()
     with open(a.trace, "rb") as fh:
         tr = pickle.load(fh)
@@ -52,6 +56,8 @@ def main() -> int:
     cons = Consciousness(cfg.consciousness, tr.camera_model, score_calibration_for(cfg.detector))
     conf = float(cfg.detector.confidence)
     last = None
+    at = tuple(float(v) for v in a.at.split(",")) if a.at else None
+    near_at: dict[int, tuple[float, str, float]] = {}  # track id → (closest distance, class, stamp)
     for ev in tr.events:
         if isinstance(ev, Correction):
             cons.apply_correction(ev.pose)
@@ -64,6 +70,12 @@ def main() -> int:
             grid = replace(last[1], stamp=ev.grid.stamp)
         dets = filter_detections(ev.detections, conf)
         cons.update(dets, ev.scan, ev.T_map_base, stamp=ev.stamp, grid=grid, keyframe=ev.keyframe, robot_moved=ev.robot_moved)
+        if at is not None:
+            for u in cons._tracks:
+                if u.footprint is not None:
+                    d = math.hypot(u.footprint.center[0] - at[0], u.footprint.center[1] - at[1])
+                    if d < 0.5 and d < near_at.get(u.id, (math.inf, "", 0.0))[0]:
+                        near_at[u.id] = (d, u.label, ev.stamp)
         t = next((t for t in cons._tracks if t.id == a.track), None)
         if t is None or t.footprint is None:
             continue
@@ -73,6 +85,10 @@ def main() -> int:
         print(f"{ev.stamp:8.2f} T=({T.x:5.2f},{T.y:5.2f},{T.yaw:5.2f}) p={t.presence:.2f} f={t.frames} boxed={t.detections} "
               f"missed={t.misses} c=({fp.center[0]:.2f},{fp.center[1]:.2f}) {fp.size_x:.2f}×{fp.size_y:.2f} "
               f"{'box ' + str(box) if box is not None else '-'} {boxes}")
+    final_ids = {o.id for o in cons.objects}
+    for tid, (d, label, stamp) in sorted(near_at.items()):
+        print(f"near {at}: track {tid} {label} came within {d:.2f} m at {stamp:.2f} s; "
+              f"{'in the final map' if tid in final_ids else 'not in the final map'}")
     o = next((o for o in cons.objects if o.id == a.track), None)
     if o is None:
         print(f"track {a.track} is not in the final map")

@@ -18,18 +18,18 @@ import argparse
 import math
 import pickle
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
 
 
 def main() -> int:
+    from profile_traces import recording_detector
+
     from app.config import Config
-    from app.ocslam.consciousness import Consciousness
-    from app.ocslam.detector import score_calibration_for
-    from app.sweep.trace import Correction, filter_detections
+    from app.sweep.trace import Correction, filter_detections, replay_trace
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("trace", help="a trace pickle (runs/sweep-cache/*/trace-*.pkl)")
@@ -42,34 +42,18 @@ def main() -> int:
     with open(a.trace, "rb") as fh:
         tr = pickle.load(fh)
     cfg = Config()
-    detector = "yolo"
-    try:
-        import json
-
-        detector = json.loads((Path(a.trace).parent / "recording.json").read_text()).get("detector", "yolo")
-    except (OSError, ValueError):
-        pass
-    cfg.set("detector.kind", "oracle" if detector == "oracle" else "yolo")
+    cfg.set("detector.kind", "oracle" if recording_detector(Path(a.trace)) == "oracle" else "yolo")
     for s in a.set:
         k, _, v = s.partition("=")
         cfg.set(k, v)
-    cons = Consciousness(cfg.consciousness, tr.camera_model, score_calibration_for(cfg.detector))
     conf = float(cfg.detector.confidence)
-    last = None
     at = tuple(float(v) for v in a.at.split(",")) if a.at else None
     near_at: dict[int, tuple[float, str, float]] = {}  # track id → (closest distance, class, stamp)
-    for ev in tr.events:
+
+    def watch(ev, cons) -> None:
         if isinstance(ev, Correction):
-            cons.apply_correction(ev.pose)
             print("        loop-closure correction")
-            continue
-        grid = None
-        if cfg.consciousness.corner_check and ev.grid is not None:
-            if last is None or not last[0].same_cells(ev.grid):
-                last = (ev.grid, ev.grid.grid())
-            grid = replace(last[1], stamp=ev.grid.stamp)
-        dets = filter_detections(ev.detections, conf)
-        cons.update(dets, ev.scan, ev.T_map_base, stamp=ev.stamp, grid=grid, keyframe=ev.keyframe, robot_moved=ev.robot_moved)
+            return
         if at is not None:
             for u in cons._tracks:
                 if u.footprint is not None:
@@ -78,22 +62,24 @@ def main() -> int:
                         near_at[u.id] = (d, u.label, ev.stamp)
         t = next((t for t in cons._tracks if t.id == a.track), None)
         if t is None or t.footprint is None:
-            continue
+            return
         T, fp = ev.T_map_base, t.footprint
         box = t.boxes.get(ev.stamp)
-        boxes = [(b.label, round(b.confidence, 2), int(b.x1), int(b.x2)) for b in dets.boxes]
+        boxes = [(b.label, round(b.confidence, 2), int(b.x1), int(b.x2)) for b in filter_detections(ev.detections, conf).boxes]
         print(f"{ev.stamp:8.2f} T=({T.x:5.2f},{T.y:5.2f},{T.yaw:5.2f}) p={t.presence:.2f} f={t.frames} boxed={t.detections} "
               f"missed={t.misses} c=({fp.center[0]:.2f},{fp.center[1]:.2f}) {fp.size_x:.2f}×{fp.size_y:.2f} "
               f"{'box ' + str(box) if box is not None else '-'} {boxes}")
-    final_ids = {o.id for o in cons.objects}
+
+    objects = replay_trace(tr, cfg, on_event=watch)
+    final_ids = {o.id for o in objects}
     for tid, (d, label, stamp) in sorted(near_at.items()):
         print(f"near {at}: track {tid} {label} came within {d:.2f} m at {stamp:.2f} s; "
               f"{'in the final map' if tid in final_ids else 'not in the final map'}")
-    o = next((o for o in cons.objects if o.id == a.track), None)
+    o = next((o for o in objects if o.id == a.track), None)
     if o is None:
         print(f"track {a.track} is not in the final map")
         return 1
-    print(f"final: {o.label} at ({o.pose.x:.2f}, {o.pose.y:.2f}) presence {o.presence:.2f} (trace frame)")
+    print(f"final: {o.label} at ({o.pose.x:.2f}, {o.pose.y:.2f}) presence {o.presence:.2f} (map frame)")
     for g in tr.truth:
         d = math.hypot(g.pose.x - o.pose.x, g.pose.y - o.pose.y)
         if d < a.near:

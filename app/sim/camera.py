@@ -61,7 +61,7 @@ class Camera:
     """
 
     def __init__(self, p: Any, client: int, *, renderer: str, seg_lut: NDArray[np.int32], gl_thread: int | None,
-                 shadow_switch: ShadowMapSwitch | None = None, shadow_map: bool = True) -> None:
+                 shadow_switch: ShadowMapSwitch | None = None, shadow_map: bool = False) -> None:
         self._p = p
         self.shadow_switch = shadow_switch
         self.shadow_map = shadow_map

@@ -5,7 +5,7 @@ shadow map and then draws the frame with a shader that samples it: on Mesa's llv
 is two thirds of a frame, about 15 ms at any image size (a 64×48 frame costs as much as 320×240). pybullet
 offers no switch for it: its ``shadow=0`` argument and ``configureDebugVisualizer(COV_ENABLE_SHADOWS, 0)``
 reach TinyRenderer and the GUI, not the plugin. The pass is chosen by one global ``bool useShadowMap``
-in the plugin's own code; :func:`set_egl_shadow_map` finds that flag through the symbol table of the
+in the plugin's own code; :func:`shadow_map_switch` finds that flag through the symbol table of the
 plugin's file and the address the plugin was loaded at (``/proc/self/maps``), checks that it holds a
 boolean in a writable mapping of that file, and :class:`ShadowMapSwitch` sets it. Anything unexpected
 (another platform, a stripped or different build, the plugin not loaded) leaves the plugin untouched and
@@ -23,7 +23,6 @@ import ctypes
 import os
 import struct
 import sys
-import threading
 
 __all__ = ["SHADOW_FLAG_SYMBOL", "ShadowMapSwitch", "elf_symbol", "shadow_map_switch"]
 
@@ -32,7 +31,6 @@ SHADOW_FLAG_SYMBOL = "useShadowMap"
 
 _SHT_SYMTAB = 2
 _STT_OBJECT = 1
-_lock = threading.Lock()
 _symbols: dict[tuple[str, str], tuple[int, int] | None] = {}
 
 
@@ -94,8 +92,7 @@ class ShadowMapSwitch:
 
     def set(self, enabled: bool) -> None:
         """Draw (True) or skip (False) the shadow-map pass from the next frame on (every client of the process)."""
-        with _lock:
-            self._flag.value = 1 if enabled else 0
+        self._flag.value = 1 if enabled else 0
 
     @property
     def enabled(self) -> bool:

@@ -2,9 +2,10 @@
 
 Rendering (pybullet's EGL plugin on Mesa's llvmpipe, or TinyRenderer) is pixel fill on the CPU: 5 ms a
 320×240 frame with EGL without its shadow-map pass (app/sim/egl_shadow.py), 15–25 ms with TinyRenderer.
-:class:`CameraWorker` keeps a second pybullet client with the same world in a child process. The loop *requests* a frame at its stamp with the robot's true pose and *collects* it a fixed sim-time latency
-later (``camera.latency_s``, like a real camera driver's), blocking only if the worker is late. Frames are
-therefore processed at the same sim step whatever the machine's load: runs stay deterministic.
+:class:`CameraWorker` keeps a second pybullet client with the same world in a child process. The loop
+*requests* a frame at its stamp with the robot's true pose and *collects* it a fixed sim-time latency later
+(``camera.latency_s``, like a real camera driver's), blocking only if the worker is late. Frames are therefore
+processed at the same sim step whatever the machine's load: runs stay deterministic.
 
     worker = CameraWorker(world, cfg)
     worker.request(stamp, T_world_base, width=224, height=168)

@@ -24,6 +24,7 @@ on when the trace was built without it needs the full replay (:func:`trace_can_r
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -170,8 +171,10 @@ def filter_detections(dets: Detections, confidence: float) -> Detections:
     return replace(dets, boxes=tuple(b for b in dets.boxes if b.confidence >= confidence))
 
 
-def replay_trace(trace: Trace, cfg: Any) -> list:
-    """The final object map (``map`` frame) of a fresh consciousness with ``cfg`` fed the trace."""
+def replay_trace(trace: Trace, cfg: Any, on_event: Callable[[Any, Any], None] | None = None) -> list:
+    """The final object map (``map`` frame) of a fresh consciousness with ``cfg`` fed the trace.
+    ``on_event(event, consciousness)``: called after each event (a :class:`FuseInput` or a :class:`Correction`)
+    is applied, to watch the map grow (``scripts/track_life.py``)."""
     import logging
 
     from app.ocslam.consciousness import Consciousness
@@ -189,19 +192,22 @@ def replay_trace(trace: Trace, cfg: Any) -> list:
         try:
             if isinstance(ev, Correction):
                 cons.apply_correction(ev.pose)
-                continue
-            grid = None
-            if corner and ev.grid is not None:
-                if last is None or not last[0].same_cells(ev.grid):
-                    last = (ev.grid, ev.grid.grid())
-                elif last[0] is not ev.grid:  # the same cells: no decompression, this frame's stamp
-                    last = (ev.grid, replace(last[1], stamp=ev.grid.stamp))
-                grid = last[1]
-            cons.update(filter_detections(ev.detections, conf), ev.scan, ev.T_map_base, stamp=ev.stamp,
-                        grid=grid, keyframe=ev.keyframe, robot_moved=ev.robot_moved)
+            else:
+                grid = None
+                if corner and ev.grid is not None:
+                    if last is None or not last[0].same_cells(ev.grid):
+                        last = (ev.grid, ev.grid.grid())
+                    elif last[0] is not ev.grid:  # the same cells: no decompression, this frame's stamp
+                        last = (ev.grid, replace(last[1], stamp=ev.grid.stamp))
+                    grid = last[1]
+                cons.update(filter_detections(ev.detections, conf), ev.scan, ev.T_map_base, stamp=ev.stamp,
+                            grid=grid, keyframe=ev.keyframe, robot_moved=ev.robot_moved)
         except Exception as ex:  # as the replay: one bad message never stops it
             logging.getLogger(__name__).warning("trace %s: frame at %.3f s skipped: %s", trace.name,
                                                 getattr(ev, "stamp", float("nan")), ex)
+            continue
+        if on_event is not None:
+            on_event(ev, cons)
     T = trace.T_map_odom_end
     return [replace(o, pose=T @ o.pose, frame_id="map") if o.frame_id == "odom" else o for o in cons.objects]
 

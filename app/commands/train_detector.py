@@ -68,6 +68,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--init-onnx", type=Path, default=None, metavar="FLOAT_ONNX",
                    help="start from the weights of a float ONNX model exported by this command (e.g. "
                         "assets/models/detector-v3.onnx): converted to <runs>/<name>/init-<stem>.pt first")
+    p.add_argument("--init-prune", type=Path, default=None, metavar="CHECKPOINT",
+                   help="start a narrower network (--width) from the most important channels of each layer of this "
+                        "trained checkpoint (e.g. assets/models/detector-train.pt; app.training.narrow)")
+    p.add_argument("--width", type=float, default=None,
+                   help="YOLOv8 width multiple of a new network (YOLOv8n: 0.25; e.g. 0.125 for about half the latency)")
+    p.add_argument("--distill", type=Path, default=None, metavar="CHECKPOINT",
+                   help="a new run learns also from this trained (wider) teacher checkpoint's features "
+                        "(ultralytics' knowledge distillation)")
     p.add_argument("--init-onnx-calib", type=int, default=128, metavar="N",
                    help="with --init-onnx: BatchNorm statistics from N training images (0: identity BatchNorms)")
     p.add_argument("--imgsz", type=int, default=224, help="training image size (paper: 224)")
@@ -149,10 +157,12 @@ def run(args: argparse.Namespace) -> int:
     if args.batch is not None and args.batch < 1:
         print("ocslam: error: --batch must be at least 1", file=sys.stderr)
         return 2
-    if args.fit_schedule and not (args.resume and args.hours):
-        print("ocslam: error: --fit-schedule needs --resume and --hours (it fits a saved run's schedule to a budget)",
-              file=sys.stderr)
+    if args.fit_schedule and not args.hours:
+        print("ocslam: error: --fit-schedule needs --hours (it fits the run's schedule to a budget)", file=sys.stderr)
         return 2
+    rc = _check_narrow_args(args)
+    if rc:
+        return rc
     datasets = list(args.data or [Path("datasets/sim")])
     bad = [str(d) for d in datasets if len(datasets) > 1 and not ((d / "data.yaml").is_file() or d.is_file())]
     if bad:
@@ -222,6 +232,12 @@ def run(args: argparse.Namespace) -> int:
         rc = _init_from_onnx(args, opts)
         if rc:
             return rc
+    if args.width is not None:
+        rc = _narrow_model(args, opts)
+        if rc:
+            return rc
+    if args.distill is not None:
+        opts.extra["distill_model"] = str(args.distill.resolve())
     try:
         res = train_detector(opts)
     except TrainingUnavailable as e:
@@ -272,6 +288,65 @@ def _calibration_images(data: Path, n: int) -> list[Path]:
         return files
     step = len(files) / n
     return [files[int(i * step)] for i in range(n)]
+
+
+def _check_narrow_args(args: argparse.Namespace) -> int:
+    """One line for each misuse of --width / --init-prune / --distill. Returns an exit status (0: fine)."""
+    import sys
+
+    err = None
+    if args.resume and (args.width is not None or args.init_prune is not None or args.distill is not None):
+        err = "--width, --init-prune and --distill start a new run; --resume continues the saved one as it is"
+    elif args.init_prune is not None and args.width is None:
+        err = "--init-prune needs --width (the narrower network's width multiple)"
+    elif args.init_prune is not None and (args.init_weights is not None or args.init_onnx is not None):
+        err = "--init-prune, --init-weights and --init-onnx exclude each other (each says where the weights come from)"
+    elif args.width is not None and not 0.05 <= args.width <= 0.25:
+        err = f"--width must be in [0.05, 0.25] (YOLOv8n is 0.25), got {args.width:g}"
+    else:
+        for name in ("init_prune", "distill"):
+            path = getattr(args, name)
+            if path is not None and not path.is_file():
+                err = f"--{name.replace('_', '-')}: no checkpoint at {path}"
+    if err:
+        print(f"ocslam: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _narrow_model(args: argparse.Namespace, opts: TrainOptions) -> int:
+    """--width: the run's model yaml (YOLOv8n at that width) under the run folder; with --init-prune, its
+    init weights pruned from that checkpoint. Returns an exit status (0: go on)."""
+    import sys
+
+    import yaml
+
+    from app.training.train import MISSING_EXTRA, setup_offline
+
+    run_dir = Path(opts.runs_dir) / opts.name
+    model_yaml = run_dir / f"yolov8n-w{args.width:g}.yaml"
+    try:
+        setup_offline(opts.config_dir)
+        from app.training.narrow import narrow_yaml, prune_checkpoint
+    except ImportError:
+        print(f"ocslam train-detector: {MISSING_EXTRA}", file=sys.stderr)
+        return 2
+    data_yaml = opts.data / "data.yaml" if Path(opts.data).is_dir() else Path(opts.data)
+    nc = len(yaml.safe_load(data_yaml.read_text())["names"])
+    try:
+        if args.init_prune is not None:
+            out_pt = run_dir / f"init-pruned-{args.init_prune.stem}-w{args.width:g}.pt"
+            prune_checkpoint(args.init_prune, args.width, out_pt, model_yaml)
+            opts.init_weights = out_pt
+            print(f"--init-prune: {args.init_prune} → {out_pt} (width {args.width:g}, the channels with the largest "
+                  "BatchNorm scales)")
+        else:
+            narrow_yaml(args.width, nc, model_yaml)
+    except ValueError as e:
+        print(f"ocslam: error: --width/--init-prune: {e}", file=sys.stderr)
+        return 2
+    opts.model = str(model_yaml)
+    return 0
 
 
 def _init_from_onnx(args: argparse.Namespace, opts: TrainOptions) -> int:

@@ -200,3 +200,42 @@ def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:
         side = sim.render_view(Pose2(0.0, 0.0, 0.45), width=W, height=H, segmentation=True)  # person at the right edge
         vb = visible_boxes(side.segmentation)[0]
         assert vb[2] == W and vb[4] / sil.counts(side.T_world_camera, side.info.K, W, H, [0])[0] < 0.8
+
+
+def test_silhouettes_shared_model_clients_across_worlds() -> None:
+    """One client per model serves every world: an object moved and turned, seen from a camera moved and
+    turned with it, has the same silhouette; two worlds share the clients; closing a renderer leaves
+    shared clients open."""
+    from app.training.labels import ModelClients, SilhouetteRenderer
+    from app.world.types import World, WorldObject
+
+    K = np.array([[160.0, 0.0, 160.0], [0.0, 160.0, 120.0], [0.0, 0.0, 1.0]])
+
+    def camera(x: float, y: float, yaw: float) -> np.ndarray:
+        """T_world_camera (optical: z forward, x right, y down) at 0.11 m looking along ``yaw``."""
+        c, s = np.cos(yaw), np.sin(yaw)
+        T = np.eye(4)
+        T[:3, :3] = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.array(
+            [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+        T[:3, 3] = [x, y, 0.11]
+        return T
+
+    a = World(name="a", objects=[WorldObject("chair", "dining_chair", 2.0, 0.3, yaw=0.4)])
+    yaw = 1.9  # the same scene turned by `yaw` about the origin and shifted
+    c, s = np.cos(yaw), np.sin(yaw)
+    shift = np.array([-3.0, 5.0])
+    x, y = np.array([[c, -s], [s, c]]) @ [2.0, 0.3] + shift
+    b = World(name="b", objects=[WorldObject("duck", "rubber_duck", 0.0, 9.0), WorldObject("chair", "dining_chair", x, y, yaw=0.4 + yaw)])
+    shared = ModelClients()
+    try:
+        with SilhouetteRenderer(a, clients=shared) as ra, SilhouetteRenderer(b, clients=shared) as rb:
+            got_a = ra.silhouettes(camera(0.0, 0.0, 0.1), K, 320, 240, [0])[0]
+            got_b = rb.silhouettes(camera(shift[0], shift[1], 0.1 + yaw), K, 320, 240, [1])[1]
+        assert got_a[0] > 1000 and got_a[1] > 1000
+        assert got_b[0] == pytest.approx(got_a[0], rel=0.02) and got_b[1] == pytest.approx(got_a[1], rel=0.02)
+        assert len(shared._clients) == 1  # the chair's client served both worlds; the duck was never rendered
+        with SilhouetteRenderer(a) as own:  # its own clients: the same counts
+            assert own.silhouettes(camera(0.0, 0.0, 0.1), K, 320, 240, [0])[0] == got_a
+        assert len(shared._clients) == 1
+    finally:
+        shared.close()

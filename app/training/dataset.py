@@ -56,7 +56,14 @@ import numpy as np
 import yaml
 
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
-from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes, yolo_lines
+from app.training.labels import (
+    LabelFilter,
+    ModelClients,
+    SilhouetteRenderer,
+    make_labels,
+    visible_boxes,
+    yolo_lines,
+)
 from app.training.randomization import Randomizer, sensor_effects
 from app.training.viewpoints import sample_viewpoint
 
@@ -152,16 +159,18 @@ def plan_worlds(opts: DatasetOptions) -> list[WorldTask]:
 # ----------------------------------------------------------------------------------------------
 
 _progress_queue = None
+_worker_clients: ModelClients | None = None  # a worker's silhouette clients, kept for all its worlds
 
 
 def _init_worker(q) -> None:
     """In each worker: the default SIGTERM action (the parent's handler, which turns SIGTERM into
     KeyboardInterrupt, must not be inherited: a worker that unwinds while holding the progress queue's
     lock hangs everyone), Ctrl-C left to the parent, one OpenMP thread."""
-    global _progress_queue
+    global _progress_queue, _worker_clients
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _progress_queue = q
+    _worker_clients = ModelClients()  # connected on first use, in this process; they end with it
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
@@ -195,7 +204,7 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
     base_z = float(sim.robot_model.T_base_camera_optical[2, 3])
     fam = "" if task.family == "rooms" else f", family={task.family!r}"
     world_name = "apartment" if task.kind == "apartment" else f"random_world({task.world_seed}{fam})"
-    silhouettes = SilhouetteRenderer(world, cfg.camera.near_m, cfg.camera.far_m)
+    silhouettes = SilhouetteRenderer(world, cfg.camera.near_m, cfg.camera.far_m, clients=_worker_clients)
     with tempfile.TemporaryDirectory(prefix="ocslam-tex-") as tmp:
         rz = Randomizer(sim, rng, Path(tmp), opts.distractors if opts.randomize else (0, 0))
         try:

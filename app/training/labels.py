@@ -230,36 +230,58 @@ def frustum_matrix(
     return m.T.ravel().tolist()  # column-major
 
 
-class SilhouetteRenderer:
-    """Unoccluded, untruncated pixel areas of a world's objects, for any camera pose.
+class ModelClients:
+    """One pybullet DIRECT client per object model (and scale), the model alone at the origin, geometry from
+    ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it. Any world's objects
+    of that model are rendered in it with the camera moved into the object's frame, so the clients outlive
+    a world (a dataset worker keeps one set for all its worlds). Close it to free them."""
 
-    One pybullet DIRECT client per object (created on first use, geometry from
-    ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it), so a render costs
-    only that object's triangles and the window's pixels. Close it (or use it as a context manager)
-    to free the clients.
-    """
+    def __init__(self) -> None:
+        self._clients: dict[tuple[str, float], tuple[int, NDArray[np.float64]]] = {}
 
-    def __init__(self, world, near: float = 0.05, far: float = 20.0) -> None:
-        self.world = world
-        self.near, self.far = float(near), float(far)
-        self._clients: dict[int, tuple[int, list[int], NDArray[np.float64]]] = {}
-
-    def _client(self, oid: int) -> tuple[int, list[int], NDArray[np.float64]]:
-        if oid not in self._clients:
+    def get(self, model: str, scale: float) -> tuple[int, NDArray[np.float64]]:
+        """``(client, AABB corners [8, 4] homogeneous, object frame)`` of ``model`` at ``scale``."""
+        key = (str(model), float(scale))
+        if key not in self._clients:
             import pybullet as p
 
             from app.world.models.bodies import build_model_pybullet
 
-            o = self.world.objects[oid]
             cid = p.connect(p.DIRECT)
-            bodies = [b for b, _ in build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, scale=o.scale)]
+            bodies = [b for b, _ in build_model_pybullet(cid, key[0], 0.0, 0.0, 0.0, scale=key[1])]
             lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
             for b in bodies:
                 a0, a1 = p.getAABB(b, -1, physicsClientId=cid)
                 lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
             corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-            self._clients[oid] = (cid, bodies, corners)
-        return self._clients[oid]
+            self._clients[key] = (cid, corners)
+        return self._clients[key]
+
+    def close(self) -> None:
+        import pybullet as p
+
+        for cid, _ in self._clients.values():
+            try:
+                p.disconnect(cid)
+            except Exception:
+                pass
+        self._clients.clear()
+
+
+class SilhouetteRenderer:
+    """Unoccluded, untruncated pixel areas of a world's objects, for any camera pose.
+
+    Each object is rendered alone in its model's client (:class:`ModelClients`: the model at the origin;
+    the camera is moved into the object's frame), so a render costs only that object's triangles and the
+    window's pixels. ``clients``: a set shared with other worlds (left open by :meth:`close`); by default
+    the renderer makes its own. Close it (or use it as a context manager) to free its clients.
+    """
+
+    def __init__(self, world, near: float = 0.05, far: float = 20.0, clients: ModelClients | None = None) -> None:
+        self.world = world
+        self.near, self.far = float(near), float(far)
+        self._own = clients is None
+        self._clients = ModelClients() if clients is None else clients
 
     def counts(
         self,
@@ -302,16 +324,20 @@ class SilhouetteRenderer:
         scaled back."""
         import pybullet as p
 
-        T = np.asarray(T_world_camera, dtype=np.float64)
-        T_cam_world = np.linalg.inv(T)
-        eye = T[:3, 3]
+        T_wc = np.asarray(T_world_camera, dtype=np.float64)
         max_pixels = int(max_pixels or 16384)
         out: dict[int, tuple[int, int]] = {}
         for oid in object_ids:
             oid = int(oid)
             if not 0 <= oid < len(self.world.objects):
                 continue
-            cid, bodies, corners = self._client(oid)
+            o = self.world.objects[oid]
+            cid, corners = self._clients.get(o.model, o.scale)
+            c, s_ = math.cos(o.yaw), math.sin(o.yaw)
+            T_wo = np.array([[c, -s_, 0.0, o.x], [s_, c, 0.0, o.y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+            T = np.linalg.solve(T_wo, T_wc)  # the camera in the object's frame
+            T_cam_world = np.linalg.inv(T)
+            eye = T[:3, 3]
             win = silhouette_window((T_cam_world @ corners.T).T[:, :3], K, width, height, self.near, margin, margin_top)
             if win is None:
                 out[oid] = (0, 0)
@@ -334,14 +360,8 @@ class SilhouetteRenderer:
         return out
 
     def close(self) -> None:
-        import pybullet as p
-
-        for cid, _, _ in self._clients.values():
-            try:
-                p.disconnect(cid)
-            except Exception:
-                pass
-        self._clients.clear()
+        if self._own:
+            self._clients.close()
 
     def __enter__(self) -> SilhouetteRenderer:
         return self

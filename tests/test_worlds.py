@@ -316,3 +316,15 @@ def test_wall_pieces_and_openings_tile_the_wall(length, height, cuts):
         assert 0 <= s0 < s1 <= length + 1e-9 and 0 <= z0 < z1 <= height + 1e-9
         for o in openings:  # no piece intrudes into an opening
             assert min(s1, o.end) - max(s0, o.start) <= 1e-9 or min(z1, o.top) - max(z0, o.bottom) <= 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(min_value=0, max_value=10_000), st.sampled_from(["rooms", "corridor", "lshape", "openplan"]))
+def test_bounds_are_the_union_bounds(seed: int, family: str) -> None:
+    """World.bounds (the extremes of the parts' bounds) equals the bounds of the parts' union."""
+    from shapely.geometry import Polygon
+    from shapely.ops import unary_union
+
+    w = random_world(seed, family=family)
+    parts = [x.polygon() for x in w.walls] + [Polygon(o.footprint()) for o in w.objects + w.obstacles]
+    np.testing.assert_allclose(w.bounds(), unary_union(parts).bounds, atol=1e-12)

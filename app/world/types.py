@@ -243,7 +243,11 @@ class World:
         geoms += [Polygon(o.footprint()) for o in self.obstacles]
         if not geoms:
             return (-1.0, -1.0, 1.0, 1.0)
-        return tuple(unary_union(geoms).bounds)  # type: ignore[return-value]
+        b = np.array([g.bounds for g in geoms if not g.is_empty], dtype=np.float64).reshape(-1, 4)
+        if not len(b):
+            return (-1.0, -1.0, 1.0, 1.0)
+        # the union's bounds are the extremes of the parts' (no union needed)
+        return (float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 2].max()), float(b[:, 3].max()))
 
     def route(self, name: str) -> NDArray[np.float64]:
         """``(N, 2)`` waypoints of a named route; ``WorldError`` naming the routes that exist."""

@@ -175,18 +175,18 @@ def plan_look_tour(
         done_one = False
         for j in todo:
             o = world.objects[j]
-            cands = []
+            reach = []  # (d, p, v, yaw): drivable approaches, then the ones from which the camera sees it
             for d in distances:
                 for a in np.linspace(-math.pi, math.pi, 32, endpoint=False):
                     u = np.array([math.cos(a), math.sin(a)])
                     v = (float(o.x + d * u[0]), float(o.y + d * u[1]))
                     p = (float(o.x + (d + approach_m) * u[0]), float(o.y + (d + approach_m) * u[1]))
-                    if not (free(v) and free(p) and planner.clear(p, v)):
-                        continue
-                    yaw = math.atan2(-u[1], -u[0])
-                    if not in_view_matrix(np.array([[v[0], v[1], yaw]]), [fps[j]], [occ[j]], hfov_rad * 0.8, max_range_m=max_range_m)[0, 0]:
-                        continue
-                    cands.append((math.hypot(p[0] - cur[0], p[1] - cur[1]) + 0.5 * abs(d - 1.5), p, v))
+                    if free(v) and free(p) and planner.clear(p, v):
+                        reach.append((d, p, v, math.atan2(-u[1], -u[0])))
+            sees = in_view_matrix(np.array([[r[2][0], r[2][1], r[3]] for r in reach]).reshape(-1, 3), [fps[j]], [occ[j]],
+                                  hfov_rad * 0.8, max_range_m=max_range_m)[:, 0]
+            cands = [(math.hypot(p[0] - cur[0], p[1] - cur[1]) + 0.5 * abs(d - 1.5), p, v)
+                     for (d, p, v, _), ok in zip(reach, sees) if ok]
             cands.sort(key=lambda c: c[0])
             for _, p, v in cands[:6]:
                 leg = plan(cur, p)

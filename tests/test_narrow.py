@@ -109,7 +109,8 @@ def test_prune_checkpoint_refuses_wider_and_loads(tmp_path: Path) -> None:
     "args, message",
     [
         (["--resume", "--width", "0.125"], "start a new run"),
-        (["--init-prune", "x.pt"], "needs --width"),
+        (["--init-prune", "x.pt"], "need --width"),
+        (["--act", "relu"], "need --width"),
         (["--width", "0.3"], "must be in"),
         (["--width", "0.125", "--init-prune", "no/such.pt"], "no checkpoint at"),
         (["--width", "0.125", "--distill", "no/such.pt"], "no checkpoint at"),
@@ -120,3 +121,22 @@ def test_cli_refuses_misuse(args: list[str], message: str) -> None:
                        text=True, timeout=120)
     assert r.returncode == 2
     assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_relu_variant(tmp_path: Path) -> None:
+    """--act relu: the same layout with ReLU (fused into int8 convolutions); the pruned weights carry over."""
+    from ultralytics.nn.tasks import load_checkpoint
+
+    from app.training.narrow import narrow_yaml, prune_checkpoint
+
+    with pytest.raises(ValueError, match="unknown activation"):
+        narrow_yaml(0.125, 11, tmp_path / "yolov8n-x.yaml", act="gelu")
+    wide = _random_model(0.25, tmp_path, 7)
+    src = tmp_path / "wide.pt"
+    torch.save({"model": wide, "ema": None}, src)
+    out = prune_checkpoint(src, 0.25, tmp_path / "r.pt", tmp_path / "yolov8n-w0.25-relu.yaml", act="relu")
+    m, _ = load_checkpoint(str(out))
+    acts = {type(mod.act).__name__ for mod in m.modules() if hasattr(mod, "act") and hasattr(mod, "conv")}
+    assert acts == {"ReLU"}
+    for (k, a), b in zip(wide.state_dict().items(), m.state_dict().values()):  # same width: every weight kept
+        assert torch.equal(a, b), k

@@ -73,6 +73,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "trained checkpoint (e.g. assets/models/detector-train.pt; app.training.narrow)")
     p.add_argument("--width", type=float, default=None,
                    help="YOLOv8 width multiple of a new network (YOLOv8n: 0.25; e.g. 0.125 for about half the latency)")
+    p.add_argument("--act", choices=("silu", "relu"), default=None,
+                   help="with --width: the network's activation (YOLOv8: silu; relu is fused into int8 convolutions)")
     p.add_argument("--distill", type=Path, default=None, metavar="CHECKPOINT",
                    help="a new run learns also from this trained (wider) teacher checkpoint's features "
                         "(ultralytics' knowledge distillation)")
@@ -297,8 +299,8 @@ def _check_narrow_args(args: argparse.Namespace) -> int:
     err = None
     if args.resume and (args.width is not None or args.init_prune is not None or args.distill is not None):
         err = "--width, --init-prune and --distill start a new run; --resume continues the saved one as it is"
-    elif args.init_prune is not None and args.width is None:
-        err = "--init-prune needs --width (the narrower network's width multiple)"
+    elif (args.init_prune is not None or args.act is not None) and args.width is None:
+        err = "--init-prune and --act need --width (the new network's width multiple; YOLOv8n's is 0.25)"
     elif args.init_prune is not None and (args.init_weights is not None or args.init_onnx is not None):
         err = "--init-prune, --init-weights and --init-onnx exclude each other (each says where the weights come from)"
     elif args.width is not None and not 0.05 <= args.width <= 0.25:
@@ -324,7 +326,8 @@ def _narrow_model(args: argparse.Namespace, opts: TrainOptions) -> int:
     from app.training.train import MISSING_EXTRA, setup_offline
 
     run_dir = Path(opts.runs_dir) / opts.name
-    model_yaml = run_dir / f"yolov8n-w{args.width:g}.yaml"
+    act = args.act or "silu"
+    model_yaml = run_dir / f"yolov8n-w{args.width:g}{'' if act == 'silu' else '-' + act}.yaml"
     try:
         setup_offline(opts.config_dir)
         from app.training.narrow import narrow_yaml, prune_checkpoint
@@ -336,12 +339,12 @@ def _narrow_model(args: argparse.Namespace, opts: TrainOptions) -> int:
     try:
         if args.init_prune is not None:
             out_pt = run_dir / f"init-pruned-{args.init_prune.stem}-w{args.width:g}.pt"
-            prune_checkpoint(args.init_prune, args.width, out_pt, model_yaml)
+            prune_checkpoint(args.init_prune, args.width, out_pt, model_yaml, act)
             opts.init_weights = out_pt
-            print(f"--init-prune: {args.init_prune} → {out_pt} (width {args.width:g}, the channels with the largest "
-                  "BatchNorm scales)")
+            print(f"--init-prune: {args.init_prune} → {out_pt} (width {args.width:g}, {act}, the channels with the "
+                  "largest BatchNorm scales)")
         else:
-            narrow_yaml(args.width, nc, model_yaml)
+            narrow_yaml(args.width, nc, model_yaml, act)
     except ValueError as e:
         print(f"ocslam: error: --width/--init-prune: {e}", file=sys.stderr)
         return 2

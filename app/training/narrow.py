@@ -125,16 +125,16 @@ def _c2f(src: Any, dst: Any, sel_in: np.ndarray, kept: dict[int, np.ndarray]) ->
 
 
 def _sppf(src: Any, dst: Any, sel_in: np.ndarray, kept: dict[int, np.ndarray]) -> np.ndarray:
-    c = src.cv1.conv.out_channels
-    mid = _conv(src.cv1, dst.cv1, sel_in, kept)
-    n = src.cv2.conv.in_channels // c
-    out = _conv(src.cv2, dst.cv2, np.concatenate([mid + j * c for j in range(n)]), kept)
     if getattr(src, "add", False):
         raise ValueError("SPPF with a shortcut is not handled")
-    return out
+    c = src.cv1.conv.out_channels
+    mid = _conv(src.cv1, dst.cv1, sel_in, kept)
+    n = src.cv2.conv.in_channels // c  # its output and the max-pools of it: the same channels each time
+    return _conv(src.cv2, dst.cv2, np.concatenate([mid + j * c for j in range(n)]), kept)
 
 
 def _detect(src: Any, dst: Any, feats: list[np.ndarray], kept: dict[int, np.ndarray]) -> None:
+    """Each level's box (``cv2``) and class (``cv3``) branch from that level's kept features; the DFL as it is."""
     for branches in ("cv2", "cv3"):
         for sseq, dseq, sel in zip(getattr(src, branches), getattr(dst, branches), feats):
             *inner, (sl, dl) = zip(sseq, dseq)

@@ -62,8 +62,8 @@ def test_combine_datasets_refuses_other_classes(tmp_path: Path) -> None:
         (["--data", "{a}", "--resume", "--lr0", "0.001"], "--resume continues the saved run's schedule"),
         (["--data", "{a}", "--device", "cuda:zero"], "--device must be cpu or CUDA device indices"),
         (["--data", "{a}", "--batch", "0"], "--batch must be at least 1"),
-        (["--data", "{a}", "--fit-schedule"], "--fit-schedule needs --resume and --hours"),
-        (["--data", "{a}", "--resume", "--hours", "0", "--fit-schedule"], "--fit-schedule needs --resume and --hours"),
+        (["--data", "{a}", "--hours", "0", "--fit-schedule"], "--fit-schedule needs --hours"),
+        (["--data", "{a}", "--resume", "--hours", "0", "--fit-schedule"], "--fit-schedule needs --hours"),
     ],
 )
 def test_bad_training_arguments_are_one_line_errors(tmp_path: Path, capsys, argv: list[str], message: str) -> None:

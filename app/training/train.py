@@ -256,12 +256,20 @@ def train_detector(opts: TrainOptions, log=print) -> TrainResult:
         model = YOLO(opts.model, task="detect")
         args = _fresh_args(opts, data_yaml, runs_dir)
     _add_session_callbacks(model, opts, log)
-    log(f"{'resuming' if opts.resume else 'training'} {opts.model} on {data_yaml} at {opts.imgsz} px "
+    log(f"{'resuming ' + str(last) if opts.resume else 'training ' + opts.model} on {data_yaml} at {opts.imgsz} px "
         f"({_device_text(opts.device)})")
     t0 = time.monotonic()
     model.train(**args)
     train_s = time.monotonic() - t0
     return _finish(model, opts, data_yaml, dataset_meta, train_s, log)
+
+
+def _architecture(trainer: Any, default: str) -> str:
+    """The trained network's name: its model yaml's (a resumed run's ``opts.model`` is only the default)."""
+    model = getattr(trainer, "model", None)
+    y = getattr(getattr(model, "module", model), "yaml", None)
+    name = y.get("yaml_file") if isinstance(y, dict) else None
+    return Path(str(name or default)).stem
 
 
 def _device_text(device: str) -> str:
@@ -437,7 +445,7 @@ def _finish(model: Any, opts: TrainOptions, data_yaml: Path, dataset_meta: dict,
     card: dict[str, Any] = {
         "model": {
             "file": out_model.name,
-            "architecture": Path(opts.model).stem,
+            "architecture": _architecture(trainer, opts.model),
             "format": "onnx, output [1, 4 + classes, N] (cx, cy, w, h, class scores), dynamic input"
             + (", weights stored as float16 (computed in float32)" if opts.fp16_weights else ""),
             "size_bytes": out_model.stat().st_size,

@@ -41,6 +41,11 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from app.training.narrow import (  # numpy only at import; torch when a network is built
+    ACTIVATIONS,
+    WIDTH_RANGE,
+)
+
 if TYPE_CHECKING:
     from app.training.train import TrainOptions
 
@@ -73,7 +78,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "trained checkpoint (e.g. assets/models/detector-train.pt; app.training.narrow)")
     p.add_argument("--width", type=float, default=None,
                    help="YOLOv8 width multiple of a new network (YOLOv8n: 0.25; e.g. 0.125 for about half the latency)")
-    p.add_argument("--act", choices=("silu", "relu"), default=None,
+    p.add_argument("--act", choices=tuple(ACTIVATIONS), default=None,
                    help="with --width: the network's activation (YOLOv8: silu; relu is fused into int8 convolutions)")
     p.add_argument("--distill", type=Path, default=None, metavar="CHECKPOINT",
                    help="a new run learns also from this trained (wider) teacher checkpoint's features "
@@ -303,8 +308,8 @@ def _check_narrow_args(args: argparse.Namespace) -> int:
         err = "--init-prune and --act need --width (the new network's width multiple; YOLOv8n's is 0.25)"
     elif args.init_prune is not None and (args.init_weights is not None or args.init_onnx is not None):
         err = "--init-prune, --init-weights and --init-onnx exclude each other (each says where the weights come from)"
-    elif args.width is not None and not 0.05 <= args.width <= 0.25:
-        err = f"--width must be in [0.05, 0.25] (YOLOv8n is 0.25), got {args.width:g}"
+    elif args.width is not None and not WIDTH_RANGE[0] <= args.width <= WIDTH_RANGE[1]:
+        err = f"--width must be in [{WIDTH_RANGE[0]:g}, {WIDTH_RANGE[1]:g}] (YOLOv8n is 0.25), got {args.width:g}"
     else:
         for name in ("init_prune", "distill"):
             path = getattr(args, name)
@@ -321,8 +326,7 @@ def _narrow_model(args: argparse.Namespace, opts: TrainOptions) -> int:
     init weights pruned from that checkpoint. Returns an exit status (0: go on)."""
     import sys
 
-    import yaml
-
+    from app.ocslam.messages import CLASS_NAMES
     from app.training.train import MISSING_EXTRA, setup_offline
 
     run_dir = Path(opts.runs_dir) / opts.name
@@ -334,8 +338,7 @@ def _narrow_model(args: argparse.Namespace, opts: TrainOptions) -> int:
     except ImportError:
         print(f"ocslam train-detector: {MISSING_EXTRA}", file=sys.stderr)
         return 2
-    data_yaml = opts.data / "data.yaml" if Path(opts.data).is_dir() else Path(opts.data)
-    nc = len(yaml.safe_load(data_yaml.read_text())["names"])
+    nc = len(CLASS_NAMES)  # the training refuses a dataset with other classes (train._data_yaml)
     try:
         if args.init_prune is not None:
             out_pt = run_dir / f"init-pruned-{args.init_prune.stem}-w{args.width:g}.pt"

@@ -41,6 +41,8 @@ def model_width(model: Any) -> float:
     return float(y["scales"][y.get("scale", "n")][1]) if "scales" in y else float(y.get("width_multiple", 0.25))
 
 
+#: the width multiples :func:`narrow_yaml` builds (YOLOv8n is 0.25)
+WIDTH_RANGE = (0.05, 0.25)
 #: activations a narrow network may use instead of YOLOv8's SiLU (ultralytics' ``activation`` yaml key)
 ACTIVATIONS = {"silu": None, "relu": "nn.ReLU()"}
 
@@ -53,8 +55,8 @@ def narrow_yaml(width: float, nc: int, out: Path, act: str = "silu") -> Path:
     import yaml
     from ultralytics.nn.tasks import yaml_model_load
 
-    if not 0.05 <= width <= 0.25:
-        raise ValueError(f"width must be in [0.05, 0.25] (YOLOv8n is 0.25), got {width}")
+    if not WIDTH_RANGE[0] <= width <= WIDTH_RANGE[1]:
+        raise ValueError(f"width must be in [{WIDTH_RANGE[0]:g}, {WIDTH_RANGE[1]:g}] (YOLOv8n is 0.25), got {width:g}")
     d = copy.deepcopy(yaml_model_load(BASE_YAML))
     for k in ("yaml_file", "scale", "channels"):
         d.pop(k, None)

@@ -65,13 +65,55 @@ def open_page(context, url: str):
     return page
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = 60.0, interval: float = 0.1, what: str = "condition") -> None:
+def wait_for(
+    cond: Callable[[], bool],
+    timeout: float = 60.0,
+    interval: float = 0.1,
+    what: str = "condition",
+    state: Callable[[], str] | None = None,
+) -> None:
+    """Poll ``cond`` until it holds; on timeout fail naming ``what`` and the app's state then
+    (``state``, or the hook of :func:`describe_failures_with`)."""
+    state = state or _state_hook
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         if cond():
             return
         time.sleep(interval)
-    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}" + (f" ({state()})" if state else ""))
+
+
+_state_hook: Callable[[], str] | None = None
+
+
+def describe_failures_with(state: Callable[[], str] | None) -> None:
+    """Name the state every later :func:`wait_for` timeout reports (a module's app fixture sets it)."""
+    global _state_hook
+    _state_hook = state
+
+
+def app_state(app) -> str:
+    """One line of the live app's state for a failure message: how far and how fast the loop ran."""
+    p = app.pipeline
+    return (
+        f"sim t={p.time:.1f} s, real-time factor {app.real_time_factor:.2f}, drive {p.drive_mode}, "
+        f"cmd ({p.cmd.linear_x:.2f} m/s, {p.cmd.angular_z:.2f} rad/s), teleop presses {app.teleop.presses}, "
+        f"clients {len(app.server.get_clients())}, loop error {app.loop_error}"
+    )
+
+
+def hold_key(page, app, key: str, until: Callable[[], bool], *, timeout: float = 60.0, what: str) -> None:
+    """Keep pressing ``key`` every 0.2 s, as a held key's auto-repeat does, until ``until()`` holds.
+
+    The teleop deadman runs on the wall clock and the loop may run well below real time on a loaded
+    2-core machine, so a fixed number of presses may move the robot less than a test expects."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        page.keyboard.press(key)
+        if until():
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"timed out after {timeout:.0f} s holding '{key}' for {what} ({app_state(app)})")
 
 
 def screenshot(page, name: str) -> Path:

@@ -11,21 +11,31 @@ import time
 
 import numpy as np
 import pytest
-from browser import browser_page, focus_canvas, screenshot, wait_for
+from browser import (
+    app_state,
+    browser_page,
+    describe_failures_with,
+    focus_canvas,
+    hold_key,
+    screenshot,
+    wait_for,
+)
 
 from app.config import Config
 from app.server import OcslamApp
 
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.timeout(300)]
 
 
 @pytest.fixture(scope="module")
 def app():
     cfg = Config.load(None, ["detector.kind=none", "server.port=0"])
     a = OcslamApp(cfg).start()
+    describe_failures_with(lambda: app_state(a))
     try:
         yield a
     finally:
+        describe_failures_with(None)
         a.stop()
 
 
@@ -55,10 +65,7 @@ def test_page_shows_the_scene(app, page) -> None:
 def test_key_i_drives_the_robot_forward(app, page) -> None:
     focus_canvas(page)
     start = app.pipeline.sim.true_pose()
-    for _ in range(10):
-        page.keyboard.press("i")
-        time.sleep(0.2)
-    wait_for(lambda: app.pipeline.sim.true_pose().distance(start) > 0.15, what="the robot to move")
+    hold_key(page, app, "i", lambda: app.pipeline.sim.true_pose().distance(start) > 0.15, what="the robot to move")
     d = start.between(app.pipeline.sim.true_pose())
     assert d.x > 0.15 and abs(d.y) < 0.05, d  # forward along base_footprint +x
     page.keyboard.press("k")

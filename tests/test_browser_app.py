@@ -11,7 +11,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import browser_page, focus_canvas, open_page, screenshot, wait_for
+from browser import (
+    app_state,
+    browser_page,
+    describe_failures_with,
+    focus_canvas,
+    hold_key,
+    open_page,
+    screenshot,
+    wait_for,
+)
 
 from app.bench.wsclient import FakeViserClient
 from app.config import ASSETS, Config
@@ -19,7 +28,7 @@ from app.ocslam.se2 import Pose2
 from app.server import OcslamApp
 from app.ui.scene import LAYERS
 
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.timeout(300)]
 
 DETECTOR = "yolo" if (ASSETS / "models" / "detector.onnx").is_file() else "oracle"
 
@@ -32,9 +41,11 @@ def app(tmp_path_factory):
     cfg = Config.load(None, over)
     a = OcslamApp(cfg).start()
     a.submit(lambda p: p.follow_route("tour"))
+    describe_failures_with(lambda: app_state(a))
     try:
         yield a
     finally:
+        describe_failures_with(None)
         a.stop()
 
 
@@ -85,13 +96,10 @@ def _open_direction(app) -> float:
 
 
 def _turn_with_key(app, page, key: str, *, what: str) -> None:
-    """Press a teleop turn key a few times on the canvas and wait until the robot's heading changed."""
+    """Hold a teleop turn key on the canvas until the robot's heading changed."""
     focus_canvas(page)
     yaw0 = app.pipeline.sim.true_pose().yaw
-    for _ in range(6):
-        page.keyboard.press(key)
-        time.sleep(0.2)
-    wait_for(lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what=what)
+    hold_key(page, app, key, lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what=what)
 
 
 def _shot_std(path: Path) -> np.ndarray:

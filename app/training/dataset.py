@@ -325,10 +325,26 @@ def _run_workers(tasks: list[WorldTask], opts: DatasetOptions, render: Callable[
 
     clean = False
     seen: dict[int, Any] = {}  # every worker process ever started (the executor forgets broken ones)
+
+    def died(left: list[int]) -> DatasetError:
+        for p in seen.values():
+            p.join(timeout=1.0)
+        codes = sorted({p.exitcode for p in seen.values() if p.exitcode})
+        how = f" (exit codes {', '.join(map(str, codes))})" if codes else ""
+        return DatasetError(
+            f"a rendering worker process died{how}; worlds not rendered: {', '.join(map(str, sorted(left)))}. "
+            "The dataset is incomplete; run the command again"
+        )
+
     try:
         order = sorted(tasks, key=lambda t: -t.images)
-        pending = {ex.submit(render, t, opts): t for t in order}
-        seen.update({p.pid: p for p in _procs(ex)})
+        pending = {ex.submit(render, order[0], opts): order[0]}
+        seen.update({p.pid: p for p in _procs(ex)})  # fork: the first submit starts every worker
+        for i, t in enumerate(order[1:], 1):
+            try:
+                pending[ex.submit(render, t, opts)] = t
+            except BrokenProcessPool:  # a worker died while the rest were being queued
+                raise died([u.index for u in order[i:]] + [u.index for u in pending.values()]) from None
         while pending:
             done, _ = wait(list(pending), timeout=0.2, return_when=FIRST_COMPLETED)
             seen.update({p.pid: p for p in _procs(ex)})
@@ -338,15 +354,7 @@ def _run_workers(tasks: list[WorldTask], opts: DatasetOptions, render: Callable[
                 try:
                     records += f.result()
                 except BrokenProcessPool:
-                    left = sorted([t.index] + [u.index for u in pending.values()])
-                    for p in seen.values():
-                        p.join(timeout=1.0)
-                    codes = sorted({p.exitcode for p in seen.values() if p.exitcode})
-                    how = f" (exit codes {', '.join(map(str, codes))})" if codes else ""
-                    raise DatasetError(
-                        f"a rendering worker process died{how}; worlds not rendered: {', '.join(map(str, left))}. "
-                        "The dataset is incomplete; run the command again"
-                    ) from None
+                    raise died([t.index] + [u.index for u in pending.values()]) from None
         drain()
         clean = True
     finally:

@@ -37,10 +37,8 @@ Example:
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import threading
 from collections.abc import Sequence
 
 import numpy as np
@@ -65,17 +63,15 @@ from app.sim.egl_shadow import shadow_map_switch
 from app.sim.ground_truth import ground_truth_objects, ground_truth_obstacles
 from app.sim.lidar import Lidar, PlanarCaster
 from app.sim.renderer import (
-    EGL_INSTALL_HINT,
     EGL_PLUGIN_ENV,
     EGL_PROBE_ENV,
     RENDERER_ENV,
     RENDERERS,
+    RenderClient,
     RendererError,
     egl_mesh_alias,
     egl_plugin_path,
-    load_egl_plugin,
     probe_egl,
-    quiet_c_stdout,
     resolve_renderer,
 )
 from app.sim.robot_model import RobotModel
@@ -84,8 +80,8 @@ from app.world.types import World
 
 # the parts' public names stay importable from here (the simulator's one entry point)
 __all__ = [
-    "CameraFrame", "EGL_PLUGIN_ENV", "EGL_PROBE_ENV", "PlanarCaster", "RENDERERS", "RENDERER_ENV", "RendererError",
-    "SimWorld", "pose3", "probe_egl", "resolve_renderer",
+    "CameraFrame", "EGL_PLUGIN_ENV", "EGL_PROBE_ENV", "PlanarCaster", "RENDERERS", "RENDERER_ENV", "RenderClient",
+    "RendererError", "SimWorld", "pose3", "probe_egl", "resolve_renderer",
 ]
 
 log = logging.getLogger(__name__)
@@ -103,9 +99,19 @@ def pose3(T: Pose2, z: float = 0.0) -> NDArray[np.float64]:
 class SimWorld:
     """A world, the robot and its sensors in a private pybullet client (see the module docstring)."""
 
-    def __init__(self, world: World, config: Config, *, seed: int | None = None, renderer: str | None = None) -> None:
+    def __init__(
+        self,
+        world: World,
+        config: Config,
+        *,
+        seed: int | None = None,
+        renderer: str | None = None,
+        client: RenderClient | None = None,
+    ) -> None:
         """``renderer``: ``auto | egl | tiny`` (default ``config.sim.renderer``); the one in use is
-        :attr:`renderer` (``"egl"`` or ``"tiny"``) with a human-readable :attr:`renderer_note`."""
+        :attr:`renderer` (``"egl"`` or ``"tiny"``) with a human-readable :attr:`renderer_note`.
+        ``client``: a :class:`RenderClient` to build in (its renderer is used; it stays open after
+        :meth:`close`, for the next world); by default the world opens and closes its own."""
         import pybullet as p
 
         self._p = p
@@ -115,25 +121,18 @@ class SimWorld:
         self.dt = float(config.sim.physics_dt_s)
         self.robot_model = RobotModel.load()
         requested = renderer if renderer is not None else getattr(config.sim, "renderer", "auto")
-        self.renderer, self.renderer_note = resolve_renderer(requested)
-        self.client: int = p.connect(p.DIRECT)
-        if self.client < 0:
-            raise RuntimeError("pybullet: cannot open a DIRECT client")
-        if self.renderer == "egl":  # before any body: the plugin only sees shapes created after it loads
-            if load_egl_plugin(p, self.client) < 0:
-                if str(requested).lower() == "egl":
-                    p.disconnect(self.client)
-                    raise RendererError(f"pybullet could not load the EGL plugin. {EGL_INSTALL_HINT}")
-                log.warning("EGL plugin did not load; using TinyRenderer")
-                self.renderer, self.renderer_note = "tiny", "TinyRenderer (fallback: the EGL plugin did not load)"
+        self._owns_client = client is None
+        self._render_client = RenderClient(requested) if client is None else client
+        self.renderer, self.renderer_note = self._render_client.renderer, self._render_client.note
+        self.client: int = self._render_client.lend()
         #: the EGL plugin's OpenGL context is current on the thread that loaded it only: a render from any
         #: other thread crashes the process (even with ER_TINY_RENDERER), so it is refused instead
-        self._gl_thread: int | None = threading.get_ident() if self.renderer == "egl" else None
+        self._gl_thread: int | None = self._render_client.gl_thread
         try:
             bodies = build_bodies(p, self.client, world, self.robot_model, config,
                                   mesh_file=egl_mesh_alias if self.renderer == "egl" else None)
         except Exception:
-            p.disconnect(self.client)
+            self.close()
             raise
         self.floor_body = bodies.floor_body
         self.wall_body_ids = bodies.wall_body_ids
@@ -387,15 +386,12 @@ class SimWorld:
                     self.set_body_color(b, rgb)
 
     def close(self) -> None:
-        """Disconnect the pybullet client (idempotent)."""
+        """Disconnect the pybullet client, or give a lent one back (idempotent)."""
         if getattr(self, "client", -1) >= 0:
             if getattr(self, "_camera", None) is not None:
                 self._camera.shadow_switch = None  # the plugin may be unloaded with this client: its flag with it
-            try:
-                with quiet_c_stdout() if getattr(self, "renderer", "tiny") == "egl" else contextlib.nullcontext():
-                    self._p.disconnect(self.client)
-            except Exception:
-                pass
+            if self._owns_client:
+                self._render_client.close()
             self.client = -1
 
     def __enter__(self) -> SimWorld:

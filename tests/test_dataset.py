@@ -61,6 +61,31 @@ def test_textures_and_sensor_effects_are_images() -> None:
     assert out.shape == img.shape and out.dtype == np.uint8 and not np.array_equal(out, img)
 
 
+def test_sensor_effects_match_the_pointwise_chain_with_noise_on_every_channel() -> None:
+    """Known answer on a flat image (blur keeps it flat): each channel's mean is the contrast, gain and
+    gamma chain of the draws taken in the same order, its spread the drawn noise sigma; same seed, same image."""
+    img = np.full((120, 160, 3), (30, 90, 150), np.uint8)  # never saturated by the draws
+    for seed in range(6):
+        ref = np.random.default_rng(seed)
+        gain = ref.uniform(0.75, 1.25) * ref.uniform(0.93, 1.07, 3)
+        contrast, gamma = ref.uniform(0.8, 1.2), ref.uniform(0.8, 1.25)
+        r = ref.random()
+        if r < 0.25:
+            ref.uniform(0.4, 1.2)
+        elif r < 0.35:
+            ref.integers(3, 8)
+            ref.random()
+        sigma = ref.uniform(0.5, 7.0)
+        v = np.array([30, 90, 150]) / 255.0
+        want = np.clip(np.clip((v - 0.5) * contrast + 0.5, 0, 1) * gain, 0, 1) ** gamma * 255.0
+        out = sensor_effects(img, np.random.default_rng(seed)).astype(float)
+        assert np.array_equal(out, sensor_effects(img, np.random.default_rng(seed)))
+        inner = out[8:-8, 8:-8]  # away from the blur's border
+        np.testing.assert_allclose(inner.mean(axis=(0, 1)), want, atol=0.6)
+        if r >= 0.35:  # no blur: the noise is the drawn sigma on each channel (clipping aside)
+            np.testing.assert_allclose(inner.std(axis=(0, 1)), sigma, rtol=0.15, atol=0.35)
+
+
 @pytest.mark.slow
 def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
     out = tmp_path / "ds"

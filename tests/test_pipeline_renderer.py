@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import threading
 
 import pytest
@@ -102,3 +103,57 @@ def test_an_egl_world_refuses_renders_from_another_thread():
         assert sim.render_camera(80, 60).image.data.std() > 0  # its own thread still renders
     finally:
         sim.close()
+
+
+@pytest.mark.parametrize("renderer", ["tiny", "egl"])
+def test_a_world_built_in_a_lent_client_renders_as_in_its_own(renderer):
+    """A dataset worker's RenderClient: world B after world A in one client gives the pixels and the
+    segmentation B gives in a client of its own; the world's close leaves the lent client open."""
+    from app.ocslam.se2 import Pose2
+    from app.world.generator import random_world
+
+    if renderer == "egl" and not sim_world.probe_egl()[0]:
+        pytest.skip("EGL cannot load here")
+    cfg = Config()
+    a, b = random_world(5), random_world(6, family="corridor")
+
+    def view(sim, pose):
+        f = sim.render_view(pose, width=160, height=120, segmentation=True)
+        return f.image.data.copy(), f.segmentation.copy()
+
+    own = sim_world.SimWorld(b, cfg, seed=1, renderer=renderer)
+    try:  # a view of world B along its tour that shows objects
+        route = b.route("tour")
+        poses = [Pose2(x0, y0, math.atan2(y1 - y0, x1 - x0)) for (x0, y0), (x1, y1) in zip(route[:-1], route[1:])]
+        pose, want = next((q, v) for q in poses if ((v := view(own, q))[1] >= 0).sum() > 50)
+    finally:
+        own.close()
+    client = sim_world.RenderClient(renderer)
+    try:
+        first = sim_world.SimWorld(a, cfg, seed=1, client=client)
+        other = view(first, pose)
+        first.close()
+        assert client.id >= 0  # lent, not closed
+        second = sim_world.SimWorld(b, cfg, seed=1, client=client)
+        assert second.client == client.id and second.renderer == client.renderer == renderer
+        got = view(second, pose)
+        second.close()
+    finally:
+        client.close()
+    assert not (got[0] == other[0]).all()  # world A's leftovers would show
+    assert (got[0] == want[0]).all() and (got[1] == want[1]).all()
+    assert client.id == -1
+    with pytest.raises(RuntimeError, match="closed"):
+        client.lend()
+
+
+def test_a_render_client_asked_for_egl_that_cannot_load_it_says_so(monkeypatch):
+    monkeypatch.setenv(sim_world.EGL_PLUGIN_ENV, "/nonexistent/eglRenderer.so")
+    monkeypatch.delenv(sim_world.EGL_PROBE_ENV, raising=False)
+    with pytest.raises(sim_world.RendererError, match="EGL"):
+        sim_world.RenderClient("egl")
+    fallback = sim_world.RenderClient("auto")
+    try:
+        assert fallback.renderer == "tiny" and "fallback" in fallback.note and fallback.gl_thread is None
+    finally:
+        fallback.close()

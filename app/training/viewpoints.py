@@ -43,7 +43,7 @@ def sample_viewpoint(sim, rz: Randomizer, rng: np.random.Generator, tries: int =
     from app.ocslam.se2 import Pose2
 
     world = sim.world
-    xmin, ymin, xmax, ymax = world.bounds()
+    xmin, ymin, xmax, ymax = rz.bounds
     routes = [np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in world.routes.values() if len(r) >= 2]
     for _ in range(tries):
         mode = rng.random()

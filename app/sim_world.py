@@ -22,7 +22,8 @@ module (measured choices, see ``ocslam bench sim``):
   (``sim.renderer``: ``auto | egl | tiny``), from ``camera_optical_frame``, with depth and a segmentation
   of ground-truth object ids. The EGL plugin is first probed in a child process (a broken EGL stack
   exits the process that loads it), once per process tree. Rendering in a separate process:
-  :mod:`app.sim.render_worker`.
+  :mod:`app.sim.render_worker`. A process that builds one world after another (a dataset worker)
+  lends each a :class:`RenderClient`, which loads the EGL plugin once.
 
 Every message is stamped with sim time (``SimWorld.time``). All noise comes from seeded
 ``numpy.random.Generator`` streams (one per source). Ground truth (:meth:`true_pose`, :meth:`ground_truth_objects`,

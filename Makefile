@@ -78,8 +78,12 @@ egl:
 	  echo "      (the camera falls back to pybullet's slower TinyRenderer without it)."; \
 	fi
 
+# A hard cap on the whole suite (normally 9-10 min on 2 cores): a test wedged inside C code that holds
+# the GIL defeats pytest-timeout's signal; faulthandler_timeout (pyproject) has printed every thread's
+# stack by then, so the run fails with where it hung instead of running into CI's 90-minute limit.
+TEST_TIME_LIMIT ?= 2700
 test: $(VENV)/.installed-test browser strace egl lint
-	$(PY) -m pytest $(PYTEST_ARGS)
+	timeout -k 30 $(TEST_TIME_LIMIT) $(PY) -m pytest $(PYTEST_ARGS)
 
 test-fast: $(VENV)/.installed-test egl
 	$(PY) -m pytest -m "not slow and not browser" $(PYTEST_ARGS)

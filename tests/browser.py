@@ -65,22 +65,19 @@ def open_page(context, url: str):
     return page
 
 
-def wait_for(
-    cond: Callable[[], bool],
-    timeout: float = 60.0,
-    interval: float = 0.1,
-    what: str = "condition",
-    state: Callable[[], str] | None = None,
-) -> None:
+def wait_for(cond: Callable[[], bool], timeout: float = 60.0, interval: float = 0.1, what: str = "condition") -> None:
     """Poll ``cond`` until it holds; on timeout fail naming ``what`` and the app's state then
-    (``state``, or the hook of :func:`describe_failures_with`)."""
-    state = state or _state_hook
+    (the hook of :func:`describe_failures_with`)."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
         if cond():
             return
         time.sleep(interval)
-    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}" + (f" ({state()})" if state else ""))
+    raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}{_state()}")
+
+
+def _state() -> str:
+    return f" ({_state_hook()})" if _state_hook else ""
 
 
 _state_hook: Callable[[], str] | None = None
@@ -102,7 +99,7 @@ def app_state(app) -> str:
     )
 
 
-def hold_key(page, app, key: str, until: Callable[[], bool], *, timeout: float = 60.0, what: str) -> None:
+def hold_key(page, key: str, until: Callable[[], bool], *, timeout: float = 60.0, what: str) -> None:
     """Keep pressing ``key`` every 0.2 s, as a held key's auto-repeat does, until ``until()`` holds.
 
     The teleop deadman runs on the wall clock and the loop may run well below real time on a loaded
@@ -113,7 +110,7 @@ def hold_key(page, app, key: str, until: Callable[[], bool], *, timeout: float =
         if until():
             return
         time.sleep(0.2)
-    raise AssertionError(f"timed out after {timeout:.0f} s holding '{key}' for {what} ({app_state(app)})")
+    raise AssertionError(f"timed out after {timeout:.0f} s holding '{key}' for {what}{_state()}")
 
 
 def screenshot(page, name: str) -> Path:

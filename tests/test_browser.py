@@ -65,7 +65,7 @@ def test_page_shows_the_scene(app, page) -> None:
 def test_key_i_drives_the_robot_forward(app, page) -> None:
     focus_canvas(page)
     start = app.pipeline.sim.true_pose()
-    hold_key(page, app, "i", lambda: app.pipeline.sim.true_pose().distance(start) > 0.15, what="the robot to move")
+    hold_key(page, "i", lambda: app.pipeline.sim.true_pose().distance(start) > 0.15, what="the robot to move")
     d = start.between(app.pipeline.sim.true_pose())
     assert d.x > 0.15 and abs(d.y) < 0.05, d  # forward along base_footprint +x
     page.keyboard.press("k")

@@ -99,7 +99,7 @@ def _turn_with_key(app, page, key: str, *, what: str) -> None:
     """Hold a teleop turn key on the canvas until the robot's heading changed."""
     focus_canvas(page)
     yaw0 = app.pipeline.sim.true_pose().yaw
-    hold_key(page, app, key, lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what=what)
+    hold_key(page, key, lambda: abs(app.pipeline.sim.true_pose().yaw - yaw0) > 0.2, what=what)
 
 
 def _shot_std(path: Path) -> np.ndarray:

@@ -252,15 +252,15 @@ class RenderClient:
             self.renderer, self.note = "tiny", "TinyRenderer (fallback: the EGL plugin did not load)"
         #: the EGL plugin's OpenGL context is current on the thread that loaded it only
         self.gl_thread: int | None = threading.get_ident() if self.renderer == "egl" else None
-        self._lent = 0
+        self._used = False  # a world was built in it: the next lend empties it first
 
     def lend(self) -> int:
         """The client id, emptied (``resetSimulation``) if a world was built in it before."""
         if self.id < 0:
             raise RuntimeError("the render client is closed")
-        if self._lent:
+        if self._used:
             self._p.resetSimulation(physicsClientId=self.id)
-        self._lent += 1
+        self._used = True
         return self.id
 
     def close(self) -> None:

@@ -303,6 +303,20 @@ class SimWorld:
             frame.image = Image(stamp=frame.stamp, data=self._pixel_noise.add(frame.image.data, sigma))
         return frame
 
+    def view_camera_pose(
+        self, T_world_base: Pose2, *, camera_z: float | None = None, pitch_rad: float = 0.0
+    ) -> NDArray[np.float64]:
+        """``T_world_camera`` ``(4, 4)`` (optical frame) of :meth:`render_view`'s camera for a robot at
+        ``T_world_base`` (``camera_z``, ``pitch_rad``: as there)."""
+        T = pose3(T_world_base) @ self.robot_model.T_base_camera_optical
+        if camera_z is not None:
+            T[2, 3] = float(camera_z)
+        if pitch_rad:
+            c, s = math.cos(-pitch_rad), math.sin(-pitch_rad)
+            Rx = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+            T[:3, :3] = T[:3, :3] @ Rx
+        return T
+
     def render_view(
         self,
         T_world_base: Pose2,
@@ -323,13 +337,7 @@ class SimWorld:
         ``lightAmbientCoeff``, ``lightDiffuseCoeff``, ``lightSpecularCoeff``, ``shadow``). The simulated
         robot is moved out of view unless ``hide_robot`` is False. No pixel noise is added.
         """
-        T = pose3(T_world_base) @ self.robot_model.T_base_camera_optical
-        if camera_z is not None:
-            T[2, 3] = float(camera_z)
-        if pitch_rad:
-            c, s = math.cos(-pitch_rad), math.sin(-pitch_rad)
-            Rx = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-            T[:3, :3] = T[:3, :3] @ Rx
+        T = self.view_camera_pose(T_world_base, camera_z=camera_z, pitch_rad=pitch_rad)
         p, cid = self._p, self.client
         if hide_robot:
             p.resetBasePositionAndOrientation(self.robot_body, list(FAR_AWAY), [0, 0, 0, 1], physicsClientId=cid)

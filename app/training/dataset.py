@@ -55,12 +55,14 @@ import cv2
 import numpy as np
 import yaml
 
-from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
+from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES, CameraInfo
 from app.training.labels import (
     LabelFilter,
     ModelClients,
     SilhouetteRenderer,
     make_labels,
+    may_be_labelled,
+    object_boxes,
     visible_boxes,
     yolo_lines,
 )
@@ -222,6 +224,10 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
     fam = "" if task.family == "rooms" else f", family={task.family!r}"
     world_name = "apartment" if task.kind == "apartment" else f"random_world({task.world_seed}{fam})"
     silhouettes = SilhouetteRenderer(world, cfg.camera.near_m, cfg.camera.far_m, clients=_worker_clients)
+    boxes = object_boxes(world.objects)
+    K = CameraInfo.from_fov(W, H, cfg.camera.hfov_rad).K
+    near = float(cfg.camera.near_m)
+    min_px, min_box = opts.label_filter.scaled(W)
     with tempfile.TemporaryDirectory(prefix="ocslam-tex-") as tmp:
         rz = Randomizer(sim, rng, Path(tmp), opts.distractors if opts.randomize else (0, 0))
         try:
@@ -237,15 +243,20 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
                 cam_z = base_z + float(rng.uniform(-0.05, 0.07)) if opts.randomize else None
                 pitch = float(rng.uniform(-0.08, 0.12)) if opts.randomize else 0.0
                 light = rz.sample_light() if opts.randomize else None
+                # a view that surely holds no label is kept or dropped before it is rendered (the same draw
+                # as after rendering it: nothing in between draws from rng)
+                T_wc = sim.view_camera_pose(pose, camera_z=cam_z, pitch_rad=pitch)
+                empty = not may_be_labelled(boxes, T_wc, K, W, H, near, min_px, min_box)
+                if empty and rng.random() > opts.empty_keep_prob:
+                    continue
                 frame = sim.render_view(pose, width=W, height=H, camera_z=cam_z, pitch_rad=pitch, light=light, segmentation=True)
                 vis = visible_boxes(frame.segmentation)
-                min_px = opts.label_filter.scaled(W)[0]
                 cands = [i for i, v in vis.items() if i in class_of and v[4] >= min_px]
                 sil = silhouettes.silhouettes(frame.T_world_camera, frame.info.K, W, H, cands)
                 full = {k: v[0] for k, v in sil.items()}
                 inside = {k: v[1] for k, v in sil.items()}
-                labels = make_labels(frame.segmentation, class_of, full, opts.label_filter, inside)
-                if not any(lb.keep for lb in labels) and rng.random() > opts.empty_keep_prob:
+                labels = make_labels(frame.segmentation, class_of, full, opts.label_filter, inside, boxes=vis)
+                if not empty and not any(lb.keep for lb in labels) and rng.random() > opts.empty_keep_prob:
                     continue
                 rgb = sensor_effects(frame.image.data, fx_rng) if opts.randomize else frame.image.data
                 stem = f"w{task.index:03d}_{k:04d}"

@@ -43,6 +43,8 @@ __all__ = [
     "silhouette_window",
     "frustum_matrix",
     "SilhouetteRenderer",
+    "object_boxes",
+    "may_be_labelled",
 ]
 
 
@@ -131,17 +133,19 @@ def make_labels(
     full_pixels: Mapping[int, int],
     filt: LabelFilter = LabelFilter(),
     in_frame_pixels: Mapping[int, int] | None = None,
+    boxes: Mapping[int, tuple[int, int, int, int, int]] | None = None,
 ) -> list[ObjectLabel]:
     """Labels (kept or ignore) for every classified object visible in ``segmentation``.
 
     ``class_of`` maps object id → class index (ids not in it, e.g. walls or distractors, are skipped);
     ``full_pixels`` maps object id → unoccluded silhouette area (missing: the visible area, i.e. fraction 1);
-    ``in_frame_pixels`` → the part of it inside the frame (missing: all of it, no truncation test).
+    ``in_frame_pixels`` → the part of it inside the frame (missing: all of it, no truncation test);
+    ``boxes``: :func:`visible_boxes` of ``segmentation`` when the caller has it.
     """
     out = []
     min_pixels, min_box = filt.scaled(np.shape(segmentation)[1])
     in_frame_pixels = in_frame_pixels or {}
-    for oid, (x1, y1, x2, y2, n) in sorted(visible_boxes(segmentation).items()):
+    for oid, (x1, y1, x2, y2, n) in sorted((visible_boxes(segmentation) if boxes is None else boxes).items()):
         if oid not in class_of:
             continue
         full = max(int(full_pixels.get(oid, n)), n)
@@ -165,6 +169,57 @@ def yolo_lines(labels: list[ObjectLabel], width: int, height: int) -> list[str]:
         cx, cy = (lb.x1 + lb.x2) / 2.0 / width, (lb.y1 + lb.y2) / 2.0 / height
         rows.append(f"{lb.class_id} {cx:.6f} {cy:.6f} {lb.width / width:.6f} {lb.height / height:.6f}")
     return rows
+
+
+def object_boxes(objects, margin_m: float = 0.05) -> NDArray[np.float64]:
+    """``(N, 8, 3)`` world-frame corners of a box around each object (``WorldObject``: its convex footprint's
+    axis-aligned bounds and its height range, grown by ``margin_m`` on every side, so a renderer's own
+    tessellation of cylinders and spheres stays inside)."""
+    out = np.empty((len(objects), 8, 3))
+    for i, o in enumerate(objects):
+        fp = np.asarray(o.footprint(), dtype=np.float64)
+        z0, z1 = o.z_range()
+        lo = np.array([*fp.min(axis=0), min(z0, 0.0)]) - margin_m
+        hi = np.array([*fp.max(axis=0), z1]) + margin_m
+        out[i] = [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    return out
+
+
+def may_be_labelled(
+    boxes: NDArray[np.float64],
+    T_world_camera: NDArray[np.float64],
+    K: NDArray[np.float64],
+    width: int,
+    height: int,
+    near: float,
+    min_pixels: float,
+    min_box_px: float,
+) -> bool:
+    """False only when no object can become a kept label in this view, whatever hides it: every box of
+    ``boxes`` (``(N, 8, 3)`` world frame, :func:`object_boxes`) projects, clipped to the image, to less
+    than ``min_pixels`` or to a side shorter than ``min_box_px`` (a label's visible pixels and box lie inside
+    that projection), or lies behind the camera. A box that crosses the camera's plane counts as visible.
+
+    ``T_world_camera`` ``(4, 4)``: the optical frame (z forward, x right, y down); ``K``: its pinhole
+    matrix. A cheap test before rendering: views that surely hold no label need no render to be judged."""
+    if len(boxes) == 0:
+        return False
+    T_cw = np.linalg.inv(np.asarray(T_world_camera, dtype=np.float64))
+    p = np.asarray(boxes, dtype=np.float64) @ T_cw[:3, :3].T + T_cw[:3, 3]  # (N, 8, 3) optical frame
+    z = p[..., 2]
+    front = z > near
+    if np.any(front.any(axis=1) & ~front.all(axis=1)):  # a box across the near plane: unbounded projection
+        return True
+    full = front.all(axis=1)
+    if not full.any():
+        return False
+    q = p[full]
+    u = K[0, 0] * q[..., 0] / q[..., 2] + K[0, 2]
+    v = K[1, 1] * q[..., 1] / q[..., 2] + K[1, 2]
+    pad = 1.0  # a rasteriser's pixel on either side
+    w = np.minimum(u.max(axis=1) + pad, width) - np.maximum(u.min(axis=1) - pad, 0.0)
+    h = np.minimum(v.max(axis=1) + pad, height) - np.maximum(v.min(axis=1) - pad, 0.0)
+    return bool(np.any((w >= min_box_px) & (h >= min_box_px) & (w * h >= min_pixels)))
 
 
 def silhouette_window(

@@ -266,9 +266,25 @@ MISS_CAUSES: tuple[str, ...] = (
 )
 
 
+_VIEW_SAMPLES: dict[tuple[bytes, tuple[int, ...], float, int], np.ndarray] = {}
+
+
 def _view_samples(footprint: np.ndarray, shrink: float = 0.6, n: int = 8) -> np.ndarray:
     """``(S, 2)`` points an observer must see of a footprint: its centroid and ``n`` points of its
-    boundary pulled ``shrink`` of the way towards the centroid (so touching neighbours do not hide them)."""
+    boundary pulled ``shrink`` of the way towards the centroid (so touching neighbours do not hide them).
+    Remembered per footprint (callers ask for the same footprints pose after pose); read-only."""
+    fp = np.ascontiguousarray(footprint, dtype=np.float64)
+    key = (fp.tobytes(), fp.shape, float(shrink), int(n))
+    out = _VIEW_SAMPLES.get(key)
+    if out is None:
+        if len(_VIEW_SAMPLES) >= 4096:
+            _VIEW_SAMPLES.clear()
+        out = _VIEW_SAMPLES[key] = _compute_view_samples(fp, shrink, n)
+        out.flags.writeable = False
+    return out
+
+
+def _compute_view_samples(footprint: np.ndarray, shrink: float, n: int) -> np.ndarray:
     poly = _polygon(footprint)
     if poly is None:
         fp = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)

@@ -239,3 +239,68 @@ def test_silhouettes_shared_model_clients_across_worlds() -> None:
         assert len(shared._clients) == 1
     finally:
         shared.close()
+
+
+def _box_corners(lo, hi) -> np.ndarray:
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=float)
+
+
+def test_may_be_labelled_known_answers() -> None:
+    """The camera at the origin looking along world +x (optical z = world x, x = −y, y = −z)."""
+    from app.ocslam.messages import CameraInfo
+    from app.training.labels import may_be_labelled
+
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    T[2, 3] = 0.2
+    K = CameraInfo.from_fov(320, 240, 1.04).K
+
+    def may(*boxes, min_pixels=50.0, min_box=6.0) -> bool:
+        return may_be_labelled(np.array(boxes).reshape(-1, 8, 3), T, K, 320, 240, 0.05, min_pixels, min_box)
+
+    ahead = _box_corners((2.0, -0.2, 0.0), (2.4, 0.2, 0.5))
+    assert may(ahead)
+    assert not may(_box_corners((-2.4, -0.2, 0.0), (-2.0, 0.2, 0.5)))  # behind the camera
+    assert not may(_box_corners((2.0, 3.0, 0.0), (2.4, 3.4, 0.5)))  # far to the left, outside the field of view
+    assert not may(_box_corners((40.0, 0.0, 0.0), (40.02, 0.02, 0.02)))  # a speck: fewer pixels than a label needs
+    assert may(_box_corners((40.0, 0.0, 0.0), (40.02, 0.02, 0.02)), min_pixels=0.5, min_box=0.5)
+    assert may(_box_corners((-0.5, -0.2, 0.0), (0.5, 0.2, 0.5)))  # across the camera's plane: could fill the view
+    assert may(_box_corners((2.0, 3.0, 0.0), (2.4, 3.4, 0.5)), ahead)  # one box that may be labelled is enough
+    assert not may_be_labelled(np.zeros((0, 8, 3)), T, K, 320, 240, 0.05, 50.0, 6.0)
+
+
+def test_views_that_may_not_be_labelled_hold_no_label() -> None:
+    """Rendered views of a generated world: every view in which some object covers enough pixels and a large
+    enough box to become a label is one that :func:`may_be_labelled` lets through, and some views are not."""
+    from app.config import Config
+    from app.ocslam.se2 import Pose2
+    from app.sim_world import SimWorld
+    from app.training.labels import may_be_labelled, object_boxes
+    from app.world.generator import random_world
+
+    world = random_world(7, family="rooms")
+    W, H = 160, 120
+    filt = LabelFilter()
+    min_px, min_box = filt.scaled(W)
+    boxes = object_boxes(world.objects)
+    rng = np.random.default_rng(3)
+    xmin, ymin, xmax, ymax = world.bounds()
+    maybe = labelled = 0
+    with SimWorld(world, Config(), renderer="tiny") as sim:
+        n = 0
+        while n < 60:
+            x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
+            if not sim.pose_free(x, y):
+                continue
+            n += 1
+            pose, cam_z, pitch = Pose2(x, y, rng.uniform(-np.pi, np.pi)), 0.2 + rng.uniform(-0.05, 0.07), rng.uniform(-0.08, 0.12)
+            T = sim.view_camera_pose(pose, camera_z=cam_z, pitch_rad=pitch)
+            frame = sim.render_view(pose, width=W, height=H, camera_z=cam_z, pitch_rad=pitch, segmentation=True)
+            np.testing.assert_allclose(T, frame.T_world_camera)
+            ok = may_be_labelled(boxes, T, frame.info.K, W, H, 0.05, min_px, min_box)
+            big = [i for i, (x1, y1, x2, y2, k) in visible_boxes(frame.segmentation).items()
+                   if 0 <= i < len(world.objects) and k >= min_px and min(x2 - x1, y2 - y1) >= min_box]
+            assert ok or not big, f"view {n}: objects {big} could be labelled but the view was ruled out"
+            maybe += ok
+            labelled += bool(big)
+    assert 0 < maybe < 60 and labelled > 0

@@ -203,9 +203,9 @@ def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:
 
 
 def test_silhouettes_shared_model_clients_across_worlds() -> None:
-    """One client per model serves every world: an object moved and turned, seen from a camera moved and
-    turned with it, has the same silhouette; two worlds share the clients; closing a renderer leaves
-    shared clients open."""
+    """One models' client serves every world: an object moved and turned, seen from a camera moved and
+    turned with it, has the same silhouette; two worlds share the client; closing a renderer leaves a
+    shared client open; another model in the client does not change a silhouette."""
     from app.training.labels import ModelClients, SilhouetteRenderer
     from app.world.types import World, WorldObject
 
@@ -233,10 +233,15 @@ def test_silhouettes_shared_model_clients_across_worlds() -> None:
             got_b = rb.silhouettes(camera(shift[0], shift[1], 0.1 + yaw), K, 320, 240, [1])[1]
         assert got_a[0] > 1000 and got_a[1] > 1000
         assert got_b[0] == pytest.approx(got_a[0], rel=0.02) and got_b[1] == pytest.approx(got_a[1], rel=0.02)
-        assert len(shared._clients) == 1  # the chair's client served both worlds; the duck was never rendered
-        with SilhouetteRenderer(a) as own:  # its own clients: the same counts
+        assert len(shared) == 1  # the chair served both worlds; the duck was never rendered
+        with SilhouetteRenderer(a) as own:  # its own client: the same counts
             assert own.silhouettes(camera(0.0, 0.0, 0.1), K, 320, 240, [0])[0] == got_a
-        assert len(shared._clients) == 1
+        assert len(shared) == 1
+        with SilhouetteRenderer(b, clients=shared) as rb:  # the duck joins the client (at the origin, as the chair)
+            duck = rb.silhouettes(camera(-0.6, 9.0, 0.0), K, 320, 240, [0])[0]
+            assert len(shared) == 2 and duck[0] > 100
+            assert rb.silhouettes(camera(shift[0], shift[1], 0.1 + yaw), K, 320, 240, [1])[1] == got_b  # no duck in it
+            assert rb.silhouettes(camera(-0.6, 9.0, 0.0), K, 320, 240, [0])[0] == duck  # nor chair in the duck's
     finally:
         shared.close()
 

@@ -16,8 +16,8 @@ Objects that are visible but fail these tests are returned as *ignore* regions: 
 labels (a sliver of a table leg is no "table"), and the benchmark does not count a detection on them as
 a false positive (COCO ``iscrowd``).
 
-``full_pixels`` comes from :class:`SilhouetteRenderer`: each object is built *alone* in its own small
-pybullet client (from the same catalogue parts as the simulator) and rendered through an off-centre
+``full_pixels`` comes from :class:`SilhouetteRenderer`: each object is rendered *alone* (its model the only
+one drawn in a pybullet client of object models, built from the same catalogue parts as the simulator) and rendered through an off-centre
 projection (:func:`frustum_matrix`) that covers exactly the window of its projected bounding box on the
 camera's image plane extended past the frame (left, right and bottom; not above the top edge, which
 cuts every tall object seen from the robot's low camera), at the same pixel scale. Occlusion by
@@ -286,48 +286,74 @@ def frustum_matrix(
 
 
 class ModelClients:
-    """One pybullet DIRECT client per object model (and scale), the model alone at the origin, geometry from
-    ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it. Any world's objects
-    of that model are rendered in it with the camera moved into the object's frame, so the clients outlive
-    a world (a dataset worker keeps one set for all its worlds). Close it to free them."""
+    """The object models (per scale) in one pybullet DIRECT client, each alone at the origin, geometry from
+    ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it. :meth:`get` shows
+    the model asked for and hides the others (fully transparent: TinyRenderer skips them, in the image,
+    the segmentation and the time a render takes), so any world's objects of that model are rendered with
+    the camera moved into the object's frame. The client outlives a world (a dataset worker keeps one for
+    all its worlds); one client, not one a model: each costs ~30 MB and up to a quarter second to open.
+    Close it to free it."""
 
     def __init__(self) -> None:
-        self._clients: dict[tuple[str, float], tuple[int, NDArray[np.float64]]] = {}
+        self._cid = -1
+        #: (model, scale) → (its bodies that have a visual shape, AABB corners [8, 4] homogeneous, object frame)
+        self._models: dict[tuple[str, float], tuple[list[int], NDArray[np.float64]]] = {}
+        self._shown: tuple[str, float] | None = None
+
+    def __len__(self) -> int:
+        """How many models (and scales) the client holds."""
+        return len(self._models)
+
+    def _show(self, key: tuple[str, float] | None, alpha: float) -> None:
+        import pybullet as p
+
+        for b in self._models[key][0] if key is not None else ():
+            p.changeVisualShape(b, -1, rgbaColor=[1.0, 1.0, 1.0, alpha], physicsClientId=self._cid)
 
     def get(self, model: str, scale: float) -> tuple[int, NDArray[np.float64]]:
-        """``(client, AABB corners [8, 4] homogeneous, object frame)`` of ``model`` at ``scale``."""
-        key = (str(model), float(scale))
-        if key not in self._clients:
-            import pybullet as p
+        """``(client, AABB corners [8, 4] homogeneous, object frame)`` of ``model`` at ``scale``, the only
+        model drawn in the client until the next call."""
+        import pybullet as p
 
+        key = (str(model), float(scale))
+        if self._cid < 0:
+            self._cid = p.connect(p.DIRECT)
+        if key not in self._models:
             from app.world.models.bodies import build_model_pybullet
 
-            cid = p.connect(p.DIRECT)
+            cid = self._cid
             bodies = [b for b, _ in build_model_pybullet(cid, key[0], 0.0, 0.0, 0.0, scale=key[1])]
             lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
             for b in bodies:
                 a0, a1 = p.getAABB(b, -1, physicsClientId=cid)
                 lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
             corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-            self._clients[key] = (cid, corners)
-        return self._clients[key]
+            visual = [b for b in bodies if p.getVisualShapeData(b, physicsClientId=cid)]
+            self._models[key] = (visual, corners)
+            self._show(key, 0.0)
+        if self._shown != key:
+            self._show(self._shown, 0.0)
+            self._show(key, 1.0)
+            self._shown = key
+        return self._cid, self._models[key][1]
 
     def close(self) -> None:
         import pybullet as p
 
-        for cid, _ in self._clients.values():
+        if self._cid >= 0:
             try:
-                p.disconnect(cid)
+                p.disconnect(self._cid)
             except Exception:
                 pass
-        self._clients.clear()
+        self._cid, self._shown = -1, None
+        self._models.clear()
 
 
 class SilhouetteRenderer:
     """Unoccluded, untruncated pixel areas of a world's objects, for any camera pose.
 
-    Each object is rendered alone in its model's client (:class:`ModelClients`: the model at the origin;
-    the camera is moved into the object's frame), so a render costs only that object's triangles and the
+    Each object is rendered alone, its model the only one drawn in the models' client (:class:`ModelClients`:
+    the model at the origin; the camera is moved into the object's frame), so a render costs only that object's triangles and the
     window's pixels. ``clients``: a set shared with other worlds (left open by :meth:`close`); by default
     the renderer makes its own. Close it (or use it as a context manager) to free its clients.
     """

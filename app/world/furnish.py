@@ -22,11 +22,8 @@ from shapely.ops import unary_union
 
 from app.world.models.colors import FLOOR_COLORS, WALL_COLORS, pick_color
 from app.world.models.geometry import model_footprint
-from app.world.planner import Planner
-from app.world.tour import plan_look_tour
+from app.world.tour import plan_look_tour, tour_planner
 from app.world.types import (
-    ROBOT_RADIUS_M,
-    ROUTE_MARGIN_M,
     Obstacle,
     Opening,
     Wall,
@@ -327,7 +324,7 @@ class Builder:
         looks at every object (:func:`plan_look_tour`); validated, or ``None``."""
         from app.ocslam.se2 import Pose2
         zones = dict(self.zones)
-        planner = Planner(self.world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35, res=0.1)
+        planner = tour_planner(self.world, res=0.1)
         z = zones[start_zone]
         c = planner.nearest_free((z[0] + z[2]) / 2, (z[1] + z[3]) / 2, max_r=2.0)
         if c is None:
@@ -340,7 +337,7 @@ class Builder:
             cell = planner.nearest_free((z[0] + z[2]) / 2, (z[1] + z[3]) / 2, max_r=1.5)
             if cell is not None:
                 goals.append(planner.point(cell))
-        route = plan_look_tour(self.world, goals, res=0.1)
+        route = plan_look_tour(self.world, goals, res=0.1, planner=planner)
         if route is None:
             return None
         self.world.routes = {"tour": route}

@@ -102,6 +102,12 @@ def tour_view_counts(
     return m.sum(axis=0)
 
 
+def tour_planner(world: Any, res: float = 0.05) -> Planner:
+    """The :class:`Planner` that :func:`plan_look_tour` plans its legs on: robot radius + route margin + 2 cm
+    from everything, 0.35 m preferred, ``res`` m cells."""
+    return Planner(world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35, res=res)
+
+
 def plan_look_tour(
     world: Any,
     base: Sequence[tuple[float, float]] | None = None,
@@ -114,6 +120,7 @@ def plan_look_tour(
     max_legs: int = 60,
     strict: bool = True,
     res: float = 0.05,
+    planner: Planner | None = None,
 ) -> list[tuple[float, float]] | None:
     """A ``tour`` that brings every object into view: from ``start``, repeatedly drive to the nearest
     object not yet seen from ``min_views`` route poses, ending with a straight ``approach_m`` run
@@ -122,8 +129,9 @@ def plan_look_tour(
     string pulling). ``base`` (goals from ``start``, e.g. a hand-written loop; legs between them are
     planned) is driven first.
     ``None`` when a leg cannot be planned or (``strict``) some object stays out of view. ``res``: the
-    planning grid's cell size (m)."""
-    planner = Planner(world, ROBOT_RADIUS_M + ROUTE_MARGIN_M + 0.02, preferred=0.35, res=res)
+    planning grid's cell size (m); ``planner``: the caller's :class:`Planner` of this world with these settings
+    (``tour_planner(world, res)``), instead of a new one (its distance grid is most of its cost)."""
+    planner = planner if planner is not None else tour_planner(world, res)
     occ = occluders_for(world)
     fps = [o.footprint() for o in world.objects]
     start = (float(world.start.x), float(world.start.y))

@@ -174,3 +174,42 @@ def test_randomised_floor_is_textured_in_both_renderers(renderer: str, tmp_path:
         assert floor.std(axis=0).max() > 20.0  # two colours, not the plain white of an untextured overlay
     finally:
         sim.close()
+
+
+def test_urdf_mesh_box_predicts_the_loaded_distractors_bounds(tmp_path: Path) -> None:
+    """A distractor's disc is judged before it is loaded: for pybullet_data's random URDFs, loaded turned and
+    scaled, the AABB's centre is the predicted one and its half extents are at least the predicted ones (the
+    collision margin); URDFs of another build are not predicted."""
+    import math
+
+    import pybullet as p
+    import pybullet_data
+
+    from app.training.randomization import _distractor_urdfs, urdf_mesh_box
+
+    urdfs = _distractor_urdfs(pybullet_data.getDataPath())
+    assert len(urdfs) >= 100
+    rng = np.random.default_rng(11)
+    cid = p.connect(p.DIRECT)
+    try:
+        for k in rng.choice(len(urdfs), 30, replace=False):
+            box = urdf_mesh_box(str(urdfs[k]))
+            assert box is not None and box.shape == (2, 2) and np.all(box[1] > box[0])
+            s, yaw, (x, y) = float(rng.uniform(2, 7)), float(rng.uniform(-math.pi, math.pi)), rng.uniform(-3, 3, 2)
+            b = p.loadURDF(str(urdfs[k]), [x, y, 0.0], p.getQuaternionFromEuler([0, 0, yaw]), globalScaling=s,
+                           useFixedBase=True, physicsClientId=cid)
+            lo, hi = (np.asarray(v)[:2] for v in p.getAABB(b, -1, physicsClientId=cid))
+            R = np.array([[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]])
+            centre = np.array([x, y]) + R @ (s * box.mean(axis=0))
+            half = np.abs(R) @ (s * (box[1] - box[0]) / 2)
+            np.testing.assert_allclose((lo + hi) / 2, centre, atol=1e-6)
+            assert np.all((hi - lo) / 2 >= half - 1e-9) and np.all((hi - lo) / 2 <= half + 0.02)
+    finally:
+        p.disconnect(cid)
+    joint = tmp_path / "two_links.urdf"
+    joint.write_text('<robot name="r"><link name="a"/><link name="b"/>'
+                     '<joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint></robot>')
+    assert urdf_mesh_box(str(joint)) is None
+    assert urdf_mesh_box(str(tmp_path / "missing.urdf")) is None
+    (tmp_path / "bad.urdf").write_text("<robot")
+    assert urdf_mesh_box(str(tmp_path / "bad.urdf")) is None

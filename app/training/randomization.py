@@ -20,7 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-__all__ = ["TEXTURE_KINDS", "Randomizer", "make_texture", "sensor_effects"]
+__all__ = ["TEXTURE_KINDS", "Randomizer", "make_texture", "sensor_effects", "urdf_mesh_box"]
 
 
 def _hsv(h: float, s: float, v: float) -> tuple[float, float, float]:
@@ -102,6 +102,44 @@ def write_quad_obj(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]
 def _distractor_urdfs(data_path: str) -> tuple[Path, ...]:
     """pybullet_data's ``random_urdfs`` (listed once a process: a directory walk of 1,000 files)."""
     return tuple(sorted((Path(data_path) / "random_urdfs").glob("*/*.urdf")))
+
+
+@functools.cache
+def urdf_mesh_box(path: str) -> np.ndarray | None:
+    """``[[xmin, ymin], [xmax, ymax]]``: the planar bounds of a one-link URDF's collision mesh in its link
+    frame at ``globalScaling`` 1 (the mesh's vertices times its ``scale``), or ``None`` for any other URDF
+    (joints, several collision shapes, an offset origin, no mesh, an unreadable file).
+
+    pybullet bounds a convex mesh by its local box turned into the world (plus a small collision margin),
+    so a body loaded at ``(x, y)``, turned by ``yaw`` and scaled by ``s`` has the planar AABB centre
+    ``(x, y) + R(yaw)·s·c`` (``c`` the box's centre) exactly and half extents at least ``|R(yaw)|·s·h``:
+    :meth:`Randomizer._place_distractors` turns down a draw that surely does not fit before loading it."""
+    import re
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+        links = root.findall("link")
+        if len(links) != 1 or root.findall("joint"):
+            return None
+        cols = links[0].findall("collision")
+        if len(cols) != 1:
+            return None
+        origin = cols[0].find("origin")
+        if origin is not None and any(float(v) != 0.0 for k in ("xyz", "rpy") for v in origin.get(k, "0 0 0").split()):
+            return None
+        mesh = cols[0].find("geometry/mesh")
+        if mesh is None or not mesh.get("filename"):
+            return None
+        scale = np.array([float(v) for v in mesh.get("scale", "1 1 1").split()], dtype=np.float64)
+        data = (Path(path).parent / str(mesh.get("filename"))).read_bytes()
+        v = np.array(re.findall(rb"^v\s+(\S+)\s+(\S+)\s", data, re.M), dtype=np.float64).reshape(-1, 2)
+    except (OSError, ValueError, ET.ParseError):
+        return None
+    if not len(v) or scale.shape != (3,):
+        return None
+    xy = v * scale[:2]
+    return np.array([xy.min(axis=0), xy.max(axis=0)])
 
 
 class Randomizer:
@@ -214,13 +252,30 @@ class Randomizer:
         blocking = self._blocking_union()
         xmin, ymin, xmax, ymax = self.bounds
         want = int(rng.integers(self.n_distractors[0], self.n_distractors[1] + 1))
+
+        def misfit(cx: float, cy: float, r: float, slack: float = 0.0) -> bool:
+            """A disc of radius ``r`` at ``(cx, cy)`` is too big, touches the blocking geometry or another
+            distractor (``slack``: a radius error allowed to a prediction)."""
+            return r > 0.6 or blocking.intersects(Point(cx, cy).buffer(r + 0.05 - slack)) or any(
+                math.hypot(cx - dx, cy - dy) < r + dr - slack for dx, dy, dr in self.distractor_discs
+            )
+
         tries = 0
         while len(self.distractor_bodies) < want and tries < want * 8:
             tries += 1
             urdf = self.urdfs[int(rng.integers(len(self.urdfs)))]
             scale = float(rng.uniform(2.0, 7.0))
             x, y = rng.uniform(xmin, xmax), rng.uniform(ymin, ymax)
-            q = p.getQuaternionFromEuler([0, 0, rng.uniform(-math.pi, math.pi)])
+            yaw = rng.uniform(-math.pi, math.pi)
+            box = urdf_mesh_box(str(urdf))
+            if box is not None:  # its disc before loading it: the same centre, a radius no larger
+                c, s = math.cos(yaw), math.sin(yaw)
+                mx, my = scale * (box[0] + box[1]) / 2
+                hx, hy = scale * (box[1] - box[0]) / 2
+                r = math.hypot(abs(c) * hx + abs(s) * hy, abs(s) * hx + abs(c) * hy)
+                if misfit(x + c * mx - s * my, y + s * mx + c * my, r, slack=1e-6):
+                    continue  # loading it would turn it down too
+            q = p.getQuaternionFromEuler([0, 0, yaw])
             try:
                 b = p.loadURDF(str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, physicsClientId=cid)
             except Exception:
@@ -231,9 +286,7 @@ class Randomizer:
                 lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
             r = 0.5 * math.hypot(hi[0] - lo[0], hi[1] - lo[1])
             cx, cy = (lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2
-            if r > 0.6 or blocking.intersects(Point(cx, cy).buffer(r + 0.05)) or any(
-                math.hypot(cx - dx, cy - dy) < r + dr for dx, dy, dr in self.distractor_discs
-            ):
+            if misfit(cx, cy, r):
                 p.removeBody(b, physicsClientId=cid)
                 continue
             pos, orn = p.getBasePositionAndOrientation(b, physicsClientId=cid)

@@ -213,3 +213,11 @@ def test_urdf_mesh_box_predicts_the_loaded_distractors_bounds(tmp_path: Path) ->
     assert urdf_mesh_box(str(tmp_path / "missing.urdf")) is None
     (tmp_path / "bad.urdf").write_text("<robot")
     assert urdf_mesh_box(str(tmp_path / "bad.urdf")) is None
+    one = ('<robot name="r"><link name="a"><collision><geometry><mesh filename="m.obj" scale="2 2 2"/></geometry>'
+           "</collision></link></robot>")
+    (tmp_path / "one.urdf").write_text(one)
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 -0.5 2\nvn 0 0 1\nf 1 2 1\n")
+    np.testing.assert_allclose(urdf_mesh_box(str(tmp_path / "one.urdf")), [[0.0, -1.0], [2.0, 0.0]])
+    (tmp_path / "nan.urdf").write_text(one.replace("m.obj", "nan.obj"))
+    (tmp_path / "nan.obj").write_text("v 0 0 0\nv nan nan nan\n")  # as pybullet_data's random_urdfs/168
+    assert urdf_mesh_box(str(tmp_path / "nan.urdf")) is None

@@ -108,7 +108,8 @@ def _distractor_urdfs(data_path: str) -> tuple[Path, ...]:
 def urdf_mesh_box(path: str) -> np.ndarray | None:
     """``[[xmin, ymin], [xmax, ymax]]``: the planar bounds of a one-link URDF's collision mesh in its link
     frame at ``globalScaling`` 1 (the mesh's vertices times its ``scale``), or ``None`` for any other URDF
-    (joints, several collision shapes, an offset origin, no mesh, an unreadable file).
+    (joints, several collision shapes, an offset origin, no mesh, a vertex that is not a finite number, an
+    unreadable file).
 
     pybullet bounds a convex mesh by its local box turned into the world (plus a small collision margin),
     so a body loaded at ``(x, y)``, turned by ``yaw`` and scaled by ``s`` has the planar AABB centre
@@ -139,6 +140,8 @@ def urdf_mesh_box(path: str) -> np.ndarray | None:
     if not len(v) or scale.shape != (3,):
         return None
     xy = v * scale[:2]
+    if not np.all(np.isfinite(xy)):  # e.g. random_urdfs/168's mesh holds "v nan nan nan" rows: no prediction
+        return None
     return np.array([xy.min(axis=0), xy.max(axis=0)])
 
 

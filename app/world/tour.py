@@ -173,6 +173,27 @@ def plan_look_tour(
             return None
         append(leg)
     failed: set[int] = set()
+    looks: dict[int, list[tuple[float, tuple[float, float], tuple[float, float]]]] = {}  # object → its approaches
+
+    def approaches(j: int) -> list[tuple[float, tuple[float, float], tuple[float, float]]]:
+        """``(d, p, v)``: drivable straight approaches ``p → v`` to object ``j`` from which the camera sees it
+        (they depend on the object and the grid only: worked out once)."""
+        if j in looks:
+            return looks[j]
+        o = world.objects[j]
+        reach = []  # (d, p, v, yaw): drivable approaches, then the ones from which the camera sees it
+        for d in distances:
+            for a in np.linspace(-math.pi, math.pi, 32, endpoint=False):
+                u = np.array([math.cos(a), math.sin(a)])
+                v = (float(o.x + d * u[0]), float(o.y + d * u[1]))
+                p = (float(o.x + (d + approach_m) * u[0]), float(o.y + (d + approach_m) * u[1]))
+                if free(v) and free(p) and planner.clear(p, v):
+                    reach.append((d, p, v, math.atan2(-u[1], -u[0])))
+        sees = in_view_matrix(np.array([[r[2][0], r[2][1], r[3]] for r in reach]).reshape(-1, 3), [fps[j]], [occ[j]],
+                              hfov_rad * 0.8, max_range_m=max_range_m)[:, 0]
+        looks[j] = [(d, p, v) for (d, p, v, _), ok in zip(reach, sees) if ok]
+        return looks[j]
+
     for _ in range(max_legs):
         seen = counts()
         todo = [j for j in range(len(fps)) if seen[j] < min_views and j not in failed]
@@ -182,19 +203,7 @@ def plan_look_tour(
         todo.sort(key=lambda j: math.hypot(world.objects[j].x - cur[0], world.objects[j].y - cur[1]))
         done_one = False
         for j in todo:
-            o = world.objects[j]
-            reach = []  # (d, p, v, yaw): drivable approaches, then the ones from which the camera sees it
-            for d in distances:
-                for a in np.linspace(-math.pi, math.pi, 32, endpoint=False):
-                    u = np.array([math.cos(a), math.sin(a)])
-                    v = (float(o.x + d * u[0]), float(o.y + d * u[1]))
-                    p = (float(o.x + (d + approach_m) * u[0]), float(o.y + (d + approach_m) * u[1]))
-                    if free(v) and free(p) and planner.clear(p, v):
-                        reach.append((d, p, v, math.atan2(-u[1], -u[0])))
-            sees = in_view_matrix(np.array([[r[2][0], r[2][1], r[3]] for r in reach]).reshape(-1, 3), [fps[j]], [occ[j]],
-                                  hfov_rad * 0.8, max_range_m=max_range_m)[:, 0]
-            cands = [(math.hypot(p[0] - cur[0], p[1] - cur[1]) + 0.5 * abs(d - 1.5), p, v)
-                     for (d, p, v, _), ok in zip(reach, sees) if ok]
+            cands = [(math.hypot(p[0] - cur[0], p[1] - cur[1]) + 0.5 * abs(d - 1.5), p, v) for d, p, v in approaches(j)]
             cands.sort(key=lambda c: c[0])
             for _, p, v in cands[:6]:
                 leg = plan(cur, p)

@@ -26,6 +26,11 @@ Gaussian noise).
 ``lshape``, ``openplan``, so the detector sees the furniture groups and layouts the app meets; ``--families
 rooms`` is the recipe of datasets made before 2026-12-03). Datasets with different seeds share no world.
 
+**Views without a label**: a view is kept with probability ``empty_keep_prob`` when no object is labelled
+in it. One that surely holds no label (every object's box projects too small, off the image or behind the
+camera: :func:`~app.training.labels.may_be_labelled`) is kept or dropped before it is rendered, with the same
+draw, so the dataset is the same, rendered faster.
+
 **Split by world**: a seeded choice of random worlds is the validation split; the apartment is always
 training data; no world is in both.
 

@@ -181,8 +181,13 @@ def object_boxes(objects, margin_m: float = 0.05) -> NDArray[np.float64]:
         z0, z1 = o.z_range()
         lo = np.array([*fp.min(axis=0), min(z0, 0.0)]) - margin_m
         hi = np.array([*fp.max(axis=0), z1]) + margin_m
-        out[i] = [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        out[i] = box_corners(lo, hi)
     return out
+
+
+def box_corners(lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(8, 3)`` corners of the axis-aligned box ``lo``–``hi``."""
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=np.float64)
 
 
 def may_be_labelled(
@@ -327,7 +332,7 @@ class ModelClients:
             for b in bodies:
                 a0, a1 = p.getAABB(b, -1, physicsClientId=cid)
                 lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
-            corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            corners = np.c_[box_corners(lo, hi), np.ones(8)]
             visual = [b for b in bodies if p.getVisualShapeData(b, physicsClientId=cid)]
             self._models[key] = (visual, corners)
             self._show(key, 0.0)

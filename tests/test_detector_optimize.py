@@ -58,6 +58,12 @@ def test_optimize_command_writes_an_int8_model_and_its_card(tmp_path: Path) -> N
     det = Detector(DetectorConfig(), out)  # the hash check passes against the new card
     assert det.sha256 == card["model"]["sha256"] and det.input_size == (224, 192)
     assert Detector(DetectorConfig(), src).sha256 == card["variants"][0]["sha256"]  # the float one is described too
+    # without --out the int8 model goes beside the float one, never over the app's model
+    app_model = Path("assets/models/detector.onnx")
+    before = app_model.read_bytes() if app_model.exists() else None
+    assert main(["train-detector", "--optimize", str(src), "--calib", str(DATA), "--calib-images", "11"]) == 0
+    assert (tmp_path / "float-int8.onnx").is_file() and (tmp_path / "float-int8.yaml").is_file()
+    assert (app_model.read_bytes() if app_model.exists() else None) == before
     hits = 0
     for e in yaml.safe_load((DATA / "expected.yaml").read_text()):
         rgb = np.ascontiguousarray(cv2.imread(str(DATA / e["image"]))[:, :, ::-1])

@@ -112,7 +112,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-cache", action="store_true", help="don't cache the decoded images in RAM")
     p.add_argument("--out", type=Path, default=None,
                    help="trained float ONNX (default: assets/models/detector-float.onnx, card beside it); with --optimize: "
-                        "the int8 output (default assets/models/detector.onnx)")
+                        "the int8 output (default: beside FLOAT_ONNX, named <its stem>-int8.onnx; the app's model only when named)")
     p.add_argument("--runs", type=Path, default=None, help="ultralytics run folder (default: runs/detector)")
     p.add_argument("--name", default="train", help="run name inside --runs")
     p.add_argument("--resume", action="store_true",
@@ -402,7 +402,8 @@ def _optimize(args: argparse.Namespace) -> int:
         print(f"ocslam: error: --optimize needs onnx and onnxslim (pip install onnx onnxslim, or the [train] extra): {e}",
               file=sys.stderr)
         return 2
-    out = args.out or Path("assets/models/detector.onnx")
+    # beside the float model unless named: a candidate's int8 must not replace the app's model unasked
+    out = args.out or args.optimize.with_name(args.optimize.stem + "-int8.onnx")
     try:
         optimize_for_inference(args.optimize, out, args.calib, w, h, calib_images=args.calib_images)
     except (FileNotFoundError, ValueError) as e:

@@ -10,16 +10,10 @@ import pytest
 from shapely.geometry import LineString, Point
 from shapely.ops import unary_union
 
-from app.ocslam.evaluation import (
-    MISS_CAUSES,
-    ObservationLog,
-    evaluate_objects,
-    explain_misses,
-    image_columns,
-    in_view_matrix,
-)
+from app.ocslam.evaluation import MISS_CAUSES, ObservationLog, evaluate_objects, explain_misses
 from app.ocslam.messages import CLASS_NAMES, GroundTruthObject, TrackedObject
 from app.ocslam.se2 import Pose2
+from app.ocslam.visibility import image_columns, in_view_matrix
 from app.world.format import dump_world, load_world, world_to_dict
 from app.world.generator import FAMILIES, generate
 from app.world.tour import route_poses, tour_view_counts

@@ -95,9 +95,9 @@ class _FrameLogger:
         return self.T_world_map @ log[-40:][k][1]
 
     def poll(self) -> None:
-        from app.ocslam.evaluation import in_view_matrix
         from app.ocslam.messages import CLASS_NAMES, CameraInfo
         from app.ocslam.se2 import Pose2
+        from app.ocslam.visibility import in_view_matrix
 
         dets = self.pipe.fusion.detections
         if dets is None or dets is self._last:

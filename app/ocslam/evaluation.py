@@ -18,7 +18,7 @@ recall = TP / in_scene; F1 from strict precision and recall.
 
 False negatives by cause (:func:`explain_misses`, :data:`MISS_CAUSES`), the first that applies, in the
 pipeline's order: ``never_in_view`` (no camera pose of the run had it in the field of view, unoccluded,
-within range: :func:`in_view_matrix`), ``never_detected`` (in view, but no box of its class covered its
+within range: :func:`app.ocslam.visibility.in_view_matrix`), ``never_detected`` (in view, but no box of its class covered its
 image columns), ``no_lidar_support`` (boxed, but never a LIDAR return on it inside such a box),
 ``merged`` (a shown object that stands for another true object, or one of another class, lies on it),
 ``mislocated`` (an unmatched shown object of its class stands within twice the match radius),
@@ -37,9 +37,10 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
-from shapely.geometry import Point, Polygon
+from shapely.geometry import Point
 
 from app.ocslam.messages import GroundTruthObject, GroundTruthObstacle, TrackedObject
+from app.ocslam.visibility import box_covers, footprint_polygon, image_columns, point_columns
 
 #: The paper's published row (spec §7).
 PAPER_ROW: dict[str, Any] = dict(
@@ -85,16 +86,6 @@ class ObjectReport:
         return d
 
 
-def _polygon(footprint: np.ndarray) -> Polygon | None:
-    fp = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
-    if len(fp) < 3 or not np.all(np.isfinite(fp)):
-        return None
-    poly = Polygon(fp)
-    if not poly.is_valid:
-        poly = poly.buffer(0)
-    return poly if poly.area > 0 else None
-
-
 def evaluate_objects(
     objects: Sequence[TrackedObject],
     truth: Sequence[GroundTruthObject],
@@ -106,7 +97,7 @@ def evaluate_objects(
     """Count the paper's table for a final object map (all positions in one frame)."""
     shown = [o for o in objects if o.presence >= presence_threshold]
     rep = ObjectReport(in_scene=len(truth), in_map=len(shown))
-    t_polys = [_polygon(t.footprint) for t in truth]
+    t_polys = [footprint_polygon(t.footprint) for t in truth]
     t_xy = np.array([[t.pose.x, t.pose.y] for t in truth]).reshape(-1, 2)
     o_xy = np.array([[o.pose.x, o.pose.y] for o in shown]).reshape(-1, 2)
 
@@ -157,7 +148,7 @@ def evaluate_objects(
             row.update(est_xy=None, error_m=None, cause="fn")
         rep.rows.append(row)
 
-    obstacle_polys = [p for p in (_polygon(o.footprint) for o in obstacles) if p is not None]
+    obstacle_polys = [p for p in (footprint_polygon(o.footprint) for o in obstacles) if p is not None]
     obstacle_union = shapely.union_all(obstacle_polys) if obstacle_polys else None
     known_polys = [(j, tp) for j, tp in enumerate(t_polys) if tp is not None]
     for i, o in enumerate(shown):
@@ -266,120 +257,6 @@ MISS_CAUSES: tuple[str, ...] = (
 )
 
 
-_VIEW_SAMPLES: dict[tuple[bytes, tuple[int, ...], float, int], np.ndarray] = {}
-
-
-def _view_samples(footprint: np.ndarray, shrink: float = 0.6, n: int = 8) -> np.ndarray:
-    """``(S, 2)`` points an observer must see of a footprint: its centroid and ``n`` points of its
-    boundary pulled ``shrink`` of the way towards the centroid (so touching neighbours do not hide them).
-    Remembered per footprint (callers ask for the same footprints pose after pose); read-only."""
-    fp = np.ascontiguousarray(footprint, dtype=np.float64)
-    key = (fp.tobytes(), fp.shape, float(shrink), int(n))
-    out = _VIEW_SAMPLES.get(key)
-    if out is None:
-        if len(_VIEW_SAMPLES) >= 4096:
-            _VIEW_SAMPLES.clear()
-        out = _VIEW_SAMPLES[key] = _compute_view_samples(fp, shrink, n)
-        out.flags.writeable = False
-    return out
-
-
-def _compute_view_samples(footprint: np.ndarray, shrink: float, n: int) -> np.ndarray:
-    poly = _polygon(footprint)
-    if poly is None:
-        fp = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
-        return fp.mean(axis=0, keepdims=True) if len(fp) else np.zeros((0, 2))
-    c = np.array(poly.centroid.coords[0])
-    ring = poly.exterior
-    pts = np.array([ring.interpolate(t, normalized=True).coords[0] for t in np.linspace(0, 1, n, endpoint=False)])
-    return np.vstack([c, c + shrink * (pts - c)])
-
-
-def in_view_matrix(
-    T_map_camera: np.ndarray,
-    footprints: Sequence[np.ndarray],
-    occluders: Sequence[Any],
-    hfov_rad: float,
-    max_range_m: float = 4.0,
-    min_range_m: float = 0.2,
-    min_visible: float = 0.4,
-) -> np.ndarray:
-    """Which objects each camera pose sees: ``(P, N)`` bool.
-
-    ``T_map_camera``: ``(P, 3)`` planar camera poses ``[x, y, yaw]`` (yaw = optical axis) in the map
-    frame; ``footprints``: ``N`` polygons ``(K, 2)`` in the map frame; ``occluders[j]``: a shapely
-    geometry that hides object ``j`` (walls, and the furniture tall enough to hide it; it must not
-    contain object ``j`` itself) or ``None``. An object is in view when at least ``min_visible`` of its
-    sample points (:func:`_view_samples`) lie inside the horizontal field of view, between
-    ``min_range_m`` and ``max_range_m``, with a free line of sight. A planar test: heights only enter
-    through the caller's choice of occluders.
-    """
-    poses = np.asarray(T_map_camera, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros((len(poses), len(footprints)), dtype=bool)
-    if not len(poses):
-        return out
-    for j, fp in enumerate(footprints):
-        s = _view_samples(fp)
-        if not len(s):
-            continue
-        d = s[None, :, :] - poses[:, None, :2]  # (P, S, 2)
-        rng = np.hypot(d[..., 0], d[..., 1])
-        bearing = np.arctan2(d[..., 1], d[..., 0]) - poses[:, None, 2]
-        bearing = (bearing + np.pi) % (2 * np.pi) - np.pi
-        ok = (np.abs(bearing) <= hfov_rad / 2) & (rng >= min_range_m) & (rng <= max_range_m)
-        occ = occluders[j] if j < len(occluders) else None
-        if occ is not None and not occ.is_empty and ok.any():
-            pi, si = np.nonzero(ok)
-            lines = shapely.linestrings(np.stack([poses[pi, :2], s[si]], axis=1))
-            shapely.prepare(occ)
-            ok[pi, si] = ~shapely.intersects(occ, lines)
-        out[:, j] = ok.mean(axis=1) >= min_visible - 1e-9
-    return out
-
-
-def image_columns(T_map_camera: np.ndarray, footprint: np.ndarray, fx: float, cx: float, width: int) -> tuple[float, float] | None:
-    """The image-column interval ``(u0, u1)`` that a footprint spans for a planar camera pose
-    ``[x, y, yaw]`` (pinhole, optical axis along ``yaw``, columns growing to the right), clipped to
-    ``[0, width]``; ``None`` when it lies entirely behind the camera or outside the image."""
-    x, y, yaw = (float(v) for v in np.asarray(T_map_camera).reshape(3))
-    fp = np.asarray(footprint, dtype=np.float64).reshape(-1, 2) - (x, y)
-    c, s = np.cos(yaw), np.sin(yaw)
-    fwd = c * fp[:, 0] + s * fp[:, 1]
-    left = -s * fp[:, 0] + c * fp[:, 1]
-    m = fwd > 0.05
-    if not m.any():
-        return None
-    u = cx - fx * left[m] / fwd[m]
-    if (~m).any():  # part behind the camera: the footprint reaches the image's edge on its side
-        u = np.r_[u, 0.0 if (left[~m] > 0).any() else width]
-        if (left[~m] > 0).any() and (left[~m] < 0).any():
-            u = np.r_[u, 0.0, float(width)]
-    u0, u1 = float(np.clip(u.min(), 0, width)), float(np.clip(u.max(), 0, width))
-    return (u0, u1) if u1 - u0 > 0 else None
-
-
-def point_columns(T_map_camera: np.ndarray, points: np.ndarray, fx: float, cx: float) -> np.ndarray:
-    """``(M,)`` image columns of ``(M, 2)`` map points for a planar camera pose ``[x, y, yaw]``
-    (``nan`` for points behind the camera)."""
-    x, y, yaw = (float(v) for v in np.asarray(T_map_camera).reshape(3))
-    d = np.asarray(points, dtype=np.float64).reshape(-1, 2) - (x, y)
-    c, s = np.cos(yaw), np.sin(yaw)
-    fwd = c * d[:, 0] + s * d[:, 1]
-    left = -s * d[:, 0] + c * d[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(fwd > 0.05, cx - fx * left / fwd, np.nan)
-
-
-def box_covers(cols: tuple[float, float] | None, box_x1: float, box_x2: float, min_overlap: float = 0.5) -> bool:
-    """A box ``[x1, x2]`` covers an object's columns when their overlap is at least ``min_overlap`` of
-    the narrower of the two."""
-    if cols is None:
-        return False
-    inter = min(cols[1], box_x2) - max(cols[0], box_x1)
-    narrow = max(min(cols[1] - cols[0], box_x2 - box_x1), 1e-6)
-    return inter >= min_overlap * narrow
-
-
 @dataclass
 class ObservationLog:
     """Per true object, how often a run saw it, detected it and had LIDAR on it (the evidence behind
@@ -425,7 +302,7 @@ class ObservationLog:
             if not hit:
                 continue
             self.detected[j] += 1
-            poly = _polygon(t.footprint)
+            poly = footprint_polygon(t.footprint)
             if poly is None or not len(pts):
                 continue
             near = shapely.dwithin(poly, shapely.points(pts), support_m)
@@ -459,7 +336,7 @@ def explain_misses(
     for j, (t, row) in enumerate(zip(truth, truth_rows)):
         if row.get("matched"):
             continue
-        poly = _polygon(t.footprint)
+        poly = footprint_polygon(t.footprint)
         txy = np.array([t.pose.x, t.pose.y])
         cause, detail = "lost", ""
         if log is not None and log.in_view[j] == 0:
@@ -475,7 +352,7 @@ def explain_misses(
                     continue
                 pt = Point(o.pose.x, o.pose.y)
                 near = poly is not None and poly.distance(pt) <= touch_m
-                ofp = _polygon(o.footprint) if o.footprint is not None else None
+                ofp = footprint_polygon(o.footprint) if o.footprint is not None else None
                 if not near and ofp is not None and poly is not None and poly.area > 0:
                     near = ofp.intersection(poly).area >= 0.3 * poly.area
                 if near:

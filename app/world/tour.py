@@ -1,7 +1,7 @@
 """The tour check: the camera poses a route drives through, and how often each object is in view.
 
 :func:`route_poses` samples the poses of a route, :func:`tour_view_counts` counts, per object, the
-poses that have it in view (:func:`app.ocslam.evaluation.in_view_matrix`): the fast geometric test
+poses that have it in view (:func:`app.ocslam.visibility.in_view_matrix`): the fast geometric test
 that a world's ``tour`` brings every object into view. :func:`plan_look_tour` plans such a tour.
 
 Example:
@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from shapely.geometry import Polygon
 from shapely.ops import unary_union
 
-from app.ocslam.evaluation import in_view_matrix
+from app.ocslam.visibility import in_view_matrix
 from app.world.models.catalogue import get_model
 from app.world.planner import Planner
 from app.world.types import ROBOT_RADIUS_M, ROUTE_MARGIN_M

@@ -206,7 +206,7 @@ def test_silhouettes_shared_model_clients_across_worlds() -> None:
     """One models' client serves every world: an object moved and turned, seen from a camera moved and
     turned with it, has the same silhouette; two worlds share the client; closing a renderer leaves a
     shared client open; another model in the client does not change a silhouette."""
-    from app.training.labels import ModelClients, SilhouetteRenderer
+    from app.training.labels import ModelClient, SilhouetteRenderer
     from app.world.types import World, WorldObject
 
     K = np.array([[160.0, 0.0, 160.0], [0.0, 160.0, 120.0], [0.0, 0.0, 1.0]])
@@ -226,7 +226,7 @@ def test_silhouettes_shared_model_clients_across_worlds() -> None:
     shift = np.array([-3.0, 5.0])
     x, y = np.array([[c, -s], [s, c]]) @ [2.0, 0.3] + shift
     b = World(name="b", objects=[WorldObject("duck", "rubber_duck", 0.0, 9.0), WorldObject("chair", "dining_chair", x, y, yaw=0.4 + yaw)])
-    shared = ModelClients()
+    shared = ModelClient()
     try:
         with SilhouetteRenderer(a, clients=shared) as ra, SilhouetteRenderer(b, clients=shared) as rb:
             got_a = ra.silhouettes(camera(0.0, 0.0, 0.1), K, 320, 240, [0])[0]

@@ -63,7 +63,7 @@ import yaml
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES, CameraInfo
 from app.training.labels import (
     LabelFilter,
-    ModelClients,
+    ModelClient,
     SilhouetteRenderer,
     make_labels,
     may_be_labelled,
@@ -166,7 +166,7 @@ def plan_worlds(opts: DatasetOptions) -> list[WorldTask]:
 # ----------------------------------------------------------------------------------------------
 
 _progress_queue = None
-_worker_clients: ModelClients | None = None  # a worker's silhouette clients, kept for all its worlds
+_worker_clients: ModelClient | None = None  # a worker's silhouette models' client, kept for all its worlds
 _worker_render: dict[str, Any] = {}  # a worker's RenderClient per requested renderer, kept for all its worlds
 
 
@@ -190,7 +190,7 @@ def _init_worker(q) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _progress_queue = q
-    _worker_clients = ModelClients()  # connected on first use, in this process; they end with it
+    _worker_clients = ModelClient()  # connected on first use, in this process; it ends with it
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     # llvmpipe's rasteriser threads: one per core by default; with a worker per core they only contend
     # (the 40-world recipe: 48 s against 52 s)

@@ -17,7 +17,7 @@ labels (a sliver of a table leg is no "table"), and the benchmark does not count
 a false positive (COCO ``iscrowd``).
 
 ``full_pixels`` comes from :class:`SilhouetteRenderer`: each object is rendered *alone* (its model the only
-one drawn in a pybullet client of object models, built from the same catalogue parts as the simulator) and rendered through an off-centre
+one drawn in a pybullet client of object models built from the same catalogue parts as the simulator) through an off-centre
 projection (:func:`frustum_matrix`) that covers exactly the window of its projected bounding box on the
 camera's image plane extended past the frame (left, right and bottom; not above the top edge, which
 cuts every tall object seen from the robot's low camera), at the same pixel scale. Occlusion by
@@ -290,7 +290,7 @@ def frustum_matrix(
     return m.T.ravel().tolist()  # column-major
 
 
-class ModelClients:
+class ModelClient:
     """The object models (per scale) in one pybullet DIRECT client, each alone at the origin, geometry from
     ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it. :meth:`get` shows
     the model asked for and hides the others (fully transparent: TinyRenderer skips them, in the image,
@@ -357,17 +357,17 @@ class ModelClients:
 class SilhouetteRenderer:
     """Unoccluded, untruncated pixel areas of a world's objects, for any camera pose.
 
-    Each object is rendered alone, its model the only one drawn in the models' client (:class:`ModelClients`:
+    Each object is rendered alone, its model the only one drawn in the models' client (:class:`ModelClient`:
     the model at the origin; the camera is moved into the object's frame), so a render costs only that object's triangles and the
     window's pixels. ``clients``: a set shared with other worlds (left open by :meth:`close`); by default
     the renderer makes its own. Close it (or use it as a context manager) to free its clients.
     """
 
-    def __init__(self, world, near: float = 0.05, far: float = 20.0, clients: ModelClients | None = None) -> None:
+    def __init__(self, world, near: float = 0.05, far: float = 20.0, clients: ModelClient | None = None) -> None:
         self.world = world
         self.near, self.far = float(near), float(far)
         self._own = clients is None
-        self._clients = ModelClients() if clients is None else clients
+        self._clients = ModelClient() if clients is None else clients
 
     def counts(
         self,

@@ -8,14 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.training.labels import (
-    LabelFilter,
-    frustum_matrix,
-    make_labels,
-    silhouette_window,
-    visible_boxes,
-    yolo_lines,
-)
+from app.training.labels import LabelFilter, make_labels, visible_boxes, yolo_lines
+from app.training.silhouettes import frustum_matrix, silhouette_window
 
 
 def test_visible_boxes_are_tight() -> None:
@@ -137,7 +131,7 @@ def test_labels_from_a_rendered_scene_match_the_known_objects() -> None:
     from app.ocslam.messages import CLASS_INDEX
     from app.ocslam.se2 import Pose2
     from app.sim_world import SimWorld
-    from app.training.labels import SilhouetteRenderer
+    from app.training.silhouettes import SilhouetteRenderer
     from app.world.types import World, WorldObject
 
     world = World(
@@ -184,7 +178,7 @@ def test_tall_objects_cut_by_the_top_edge_count_as_visible() -> None:
     from app.config import Config
     from app.ocslam.se2 import Pose2
     from app.sim_world import SimWorld
-    from app.training.labels import SilhouetteRenderer
+    from app.training.silhouettes import SilhouetteRenderer
     from app.world.types import World, WorldObject
 
     world = World(name="person", objects=[WorldObject("person", "person", 1.0, 0.0, yaw=3.14)])
@@ -206,7 +200,7 @@ def test_silhouettes_shared_model_clients_across_worlds() -> None:
     """One models' client serves every world: an object moved and turned, seen from a camera moved and
     turned with it, has the same silhouette; two worlds share the client; closing a renderer leaves a
     shared client open; another model in the client does not change a silhouette."""
-    from app.training.labels import ModelClient, SilhouetteRenderer
+    from app.training.silhouettes import ModelClient, SilhouetteRenderer
     from app.world.types import World, WorldObject
 
     K = np.array([[160.0, 0.0, 160.0], [0.0, 160.0, 120.0], [0.0, 0.0, 1.0]])

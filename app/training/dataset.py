@@ -9,7 +9,7 @@ object's visible pixels, kept when enough of the object is visible.
 **Visible fraction.** ``visible pixels / unoccluded pixels``. The unoccluded count comes from a second
 render of the object *alone* (its own small pybullet client) through an off-centre projection that
 covers exactly the object's projected bounding box on the camera's image plane extended past the frame,
-at the same pixel scale (:class:`app.training.labels.SilhouetteRenderer`). Occlusion by other geometry and
+at the same pixel scale (:class:`app.training.silhouettes.SilhouetteRenderer`). Occlusion by other geometry and
 truncation by the side and bottom frame edges therefore both lower the fraction, with the renderer's
 own rasterisation on both sides of the ratio (a fully visible object scores 1.0). What lies above the
 top edge does not count: the robot's low, level camera cuts every door, shelf and person there.
@@ -63,8 +63,6 @@ import yaml
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES, CameraInfo
 from app.training.labels import (
     LabelFilter,
-    ModelClient,
-    SilhouetteRenderer,
     make_labels,
     may_be_labelled,
     object_boxes,
@@ -72,6 +70,7 @@ from app.training.labels import (
     yolo_lines,
 )
 from app.training.randomization import Randomizer, sensor_effects
+from app.training.silhouettes import ModelClient, SilhouetteRenderer, label_silhouettes
 from app.training.viewpoints import sample_viewpoint
 
 __all__ = [
@@ -256,8 +255,8 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
                     continue
                 frame = sim.render_view(pose, width=W, height=H, camera_z=cam_z, pitch_rad=pitch, light=light, segmentation=True)
                 vis = visible_boxes(frame.segmentation)
-                cands = [i for i, v in vis.items() if i in class_of and v[4] >= min_px]
-                sil = silhouettes.silhouettes(frame.T_world_camera, frame.info.K, W, H, cands)
+                cands = {i: v for i, v in vis.items() if i in class_of and v[4] >= min_px}
+                sil = label_silhouettes(silhouettes, frame.T_world_camera, frame.info.K, W, H, cands, opts.label_filter)
                 full = {k: v[0] for k, v in sil.items()}
                 inside = {k: v[1] for k, v in sil.items()}
                 labels = make_labels(frame.segmentation, class_of, full, opts.label_filter, inside, boxes=vis)

@@ -26,7 +26,8 @@ import numpy as np
 from app.ocslam.config import DetectorConfig
 from app.ocslam.detector import DetectorError
 from app.ocslam.messages import CLASS_INDEX, Detection, Detections, GroundTruthObject
-from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels, visible_boxes
+from app.training.labels import LabelFilter, make_labels, visible_boxes
+from app.training.silhouettes import SilhouetteRenderer
 
 __all__ = ["OracleDetector"]
 

@@ -16,7 +16,8 @@ from app.config import Config, resolve_path
 from app.ocslam.messages import CLASS_INDEX, CLASS_NAMES
 from app.ocslam.se2 import Pose2
 from app.sim_world import SimWorld
-from app.training.labels import LabelFilter, SilhouetteRenderer, make_labels
+from app.training.labels import LabelFilter, make_labels
+from app.training.silhouettes import SilhouetteRenderer
 from app.world.format import load_world
 from app.world.generator import random_world
 

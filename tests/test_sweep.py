@@ -196,6 +196,27 @@ def test_a_recording_key_names_the_world_files_content_not_its_path(tmp_path):
     assert recording_key(cfg.to_dict(), World("w", file=str(a / "w.yaml")), 0.2, 100.0) != k1
 
 
+def test_a_rosbag2_folder_is_named_by_its_content(tmp_path):
+    """Two recordings in folders of the same name (``run1/bag``, ``run2/bag``) are two traces, never one;
+    the same recording copied elsewhere is the same; a bag that is not there is named, not hashed."""
+    from app.sweep.suite import content_sha256
+
+    def bag(root, db: bytes):
+        d = tmp_path / root / "bag"
+        d.mkdir(parents=True)
+        (d / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+        (d / "bag_0.mcap").write_bytes(db)
+        return d
+
+    a, b, c = bag("run1", b"one drive"), bag("run2", b"another drive"), bag("copy", b"one drive")
+    ha = content_sha256(a)
+    assert len(ha) == 64 and ha != content_sha256(b)
+    assert content_sha256(c) == ha
+    (c / "bag_1.mcap").write_bytes(b"")  # a second file is another recording
+    assert content_sha256(c) != ha
+    assert content_sha256(tmp_path / "nowhere" / "bag") == "missing-bag"
+
+
 def test_a_recording_key_names_the_models_content_not_its_path(tmp_path):
     """The same model moved to another path (a candidate in runs/ copied into assets/) is the same recording."""
     from app.sweep.suite import World, recording_key

@@ -139,14 +139,25 @@ def recording_key(cfg_dict: dict[str, Any], w: World, floor: float, duration: fl
 
 
 def content_sha256(path: Path) -> str:
-    """sha256 of a world or bag file (``missing:<name>`` when it cannot be read: recording it fails later,
-    with the reader's own message)."""
+    """sha256 of a world file or a bag: a ROS 1 bag file, or a rosbag2 folder (its files' relative paths and
+    contents, in sorted order: the same recording anywhere is the same hash, another recording another).
+    ``missing-<name>`` when it cannot be read: recording or replaying it fails later, with the reader's own
+    message."""
     from app.ocslam.detector import file_sha256
 
+    path = Path(path)
     try:
+        if path.is_dir():
+            files = sorted(f for f in path.rglob("*") if f.is_file())
+            if not files:
+                raise OSError(f"{path}: an empty folder")
+            h = hashlib.sha256()
+            for f in files:
+                h.update(f"{f.relative_to(path).as_posix()}\0{file_sha256(f)}\n".encode())
+            return h.hexdigest()
         return file_sha256(path)
     except OSError:
-        return f"missing:{path.name}"
+        return f"missing-{slug(path.name)}"
 
 
 def slug(name: str) -> str:

@@ -6,6 +6,7 @@ Scans are ray-cast analytically against cylinders and boxes; boxes are the proje
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -490,6 +491,42 @@ def test_ghost_decays_in_view():
     (o,) = c.objects
     assert o.presence == pytest.approx(p0 - 0.15 * 0.2 * (14 - 6), abs=1e-6)
     assert c.visible_objects() == []
+
+
+@pytest.mark.parametrize("explains_one", [True, False])
+def test_a_box_explains_one_object(explains_one: bool):
+    """Two balls a hand's width apart, boxed one by one in 6 frames; then one box spans both (the detector
+    merged them, or the second is a false object on clutter). The box gives the ball it fits; with
+    ``box_explains_one`` the other, in clear view, counts the frame as a miss and decays once its misses
+    outnumber its detections; without it the shared box explains both and both stay."""
+    a = Cylinder(1.8, 0.22, 0.11, 0.0, 0.22)
+    b = Cylinder(1.8, -0.22, 0.11, 0.0, 0.22)
+    c = make(box_explains_one=explains_one, presence_evidence=False)
+    drive(c, [a, b], [("ball", a), ("ball", b)], line(6))
+    assert len(c.visible_objects()) == 2
+    drive(c, [a, b], [("ball", [a, b])], [Pose2(0.2, 0.0, 0.0)] * 14, t0=1.2)
+    tracks = sorted(c._tracks, key=lambda t: t.misses)
+    if explains_one:
+        assert tracks[0].misses == 0 and tracks[-1].misses == 14
+        assert len(c.visible_objects()) == 1
+    else:
+        assert all(t.misses == 0 for t in tracks) and len(c.visible_objects()) == 2
+
+
+def test_a_frame_in_which_a_twin_was_boxed_is_no_miss_of_the_merged_object():
+    """Two tracks of one object: the frames in which one of them was boxed are not misses of the other
+    once they are merged (each missed while its twin took the box)."""
+    from app.ocslam.tracks import merge_tracks
+
+    ball = Cylinder(1.8, 0.0, 0.11, 0.0, 0.22)
+    c = make()
+    drive(c, [ball], [("ball", ball)], line(4))
+    (t,) = c._tracks
+    twin = dataclasses.replace(t, id=99, boxes={}, miss_stamps={5.0, 6.0}, misses=2, detections=1)
+    t.boxes[5.0] = 0  # boxed at 5.0 (its twin was missed then), missed at 7.0
+    t.miss_stamps, t.misses = {7.0}, 1
+    merge_tracks(t, twin, c.cfg, None)
+    assert t.misses == 2 and t.miss_stamps == {6.0, 7.0}
 
 
 def test_clear_misses_weigh_against_the_published_presence():

@@ -440,6 +440,12 @@ class ConsciousnessConfig:
         help="improved: Y_c of the soft decision: the new box's confidence (the paper), the mean or the best of the object's counted frames",
         live=True,
     )
+    box_explains_one: bool = param(
+        True,
+        help="improved, ghost decay: a box that gave an object in this frame explains no other object in its wedge "
+        "(a third chair between two sofas' boxes is missed in clear view)",
+        live=True,
+    )
     shared_evidence_fraction: float = param(
         0.5, min=0.0, max=1.0, step=0.05,
         help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",

@@ -70,7 +70,11 @@ def decay_tracks(
             b, _r = cam.bearing_ranges_scan(T_scan_map.transform_points(centers[boxed]))
             held = np.zeros(len(b), dtype=bool)
             boxed_labels = np.array([cand[k].label for k in boxed], dtype=object)
-            for a in areas:
+            # a box explains one object: one that gave an object of this frame explains no other
+            taken = {t.boxes[stamp] for t in tracks if t.touched_stamp == stamp and stamp in t.boxes} if cfg.box_explains_one else set()
+            for j, a in enumerate(areas):
+                if j in taken:
+                    continue
                 rows = boxed_labels == a.label
                 if rows.any():
                     held[rows] |= a.contains_bearing(b[rows], margin=0.05)
@@ -94,6 +98,9 @@ def decay_tracks(
         # a clear miss. Detectors miss real objects now and then (and the camera may be blocked above
         # the LIDAR's plane), so only an object missed more often than it was detected decays.
         t.misses += 1
+        t.miss_stamps.add(stamp)
+        if len(t.miss_stamps) > 256:  # as many as its boxes remembers
+            t.miss_stamps.discard(min(t.miss_stamps))
         if t.misses <= t.detections:
             keep.append(t)
             continue

@@ -54,6 +54,7 @@ class Track:
     near_range: float = math.inf  # this frame's projection distance (collision rule)
     complete_views: int = 0  # observations through boxes not cut by the image border
     misses: int = 0  # frames in clear view (in range, not occluded) without a box of its class
+    miss_stamps: set[float] = field(default_factory=set)  # the stamps of those frames (recent ones)
     boxes: dict[float, int] = field(default_factory=dict)  # recent frames (stamp → box index) it was seen in
     conf_sum: float = 0.0  # confidences of the frames that counted (presence_confidence = mean / best)
     conf_n: int = 0
@@ -344,7 +345,11 @@ def merge_tracks(keep: Track, drop: Track, cfg: ConsciousnessConfig, known_free:
     keep.frames = frames
     keep.detections += drop.detections
     keep.complete_views += drop.complete_views
-    keep.misses += drop.misses
+    # a frame in which one of the two was boxed is no miss of the object they both were
+    seen_k = {m for m in keep.miss_stamps if m in drop.boxes}
+    seen_d = {m for m in drop.miss_stamps if m in keep.boxes}
+    keep.misses = max(keep.misses + drop.misses - len(seen_k) - len(seen_d), 0)
+    keep.miss_stamps = (keep.miss_stamps | drop.miss_stamps) - seen_k - seen_d
     for k, v in drop.boxes.items():
         keep.boxes.setdefault(k, v)
     keep.last_seen = max(keep.last_seen, drop.last_seen)

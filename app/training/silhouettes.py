@@ -206,7 +206,6 @@ class SilhouetteRenderer:
         or the bottom lose the parts that tell them apart (a table leg is no table).
         Windows larger than ``max_pixels`` (default 16384: counts to about 1 %) are rendered coarser and
         scaled back."""
-
         return {k: v[:2] for k, v in self.measure(
             T_world_camera, K, width, height, object_ids, margin=margin, margin_top=margin_top, max_pixels=max_pixels
         ).items()}

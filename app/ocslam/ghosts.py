@@ -97,10 +97,7 @@ def decay_tracks(
             continue
         # a clear miss. Detectors miss real objects now and then (and the camera may be blocked above
         # the LIDAR's plane), so only an object missed more often than it was detected decays.
-        t.misses += 1
-        t.miss_stamps.add(stamp)
-        if len(t.miss_stamps) > 256:  # as many as its boxes remembers
-            t.miss_stamps.discard(min(t.miss_stamps))
+        t.missed(stamp)
         if t.misses <= t.detections:
             keep.append(t)
             continue

@@ -79,6 +79,13 @@ class Track:
             for k in sorted(self.boxes)[: len(self.boxes) - keep]:
                 del self.boxes[k]
 
+    def missed(self, stamp: float, keep: int = 256) -> None:
+        """A clear miss at ``stamp`` (its stamp remembered as long as :meth:`saw` remembers boxes)."""
+        self.misses += 1
+        self.miss_stamps.add(stamp)
+        if len(self.miss_stamps) > keep:
+            self.miss_stamps.discard(min(self.miss_stamps))
+
     @property
     def partial_only(self) -> bool:
         """Only ever seen through boxes cut by the image border: possibly a fragment of a larger object."""

@@ -51,6 +51,52 @@ def recording_detector(trace: Path) -> str:
     return str(recording_meta(trace).get("detector", "?"))
 
 
+_MODEL_DIRS = ("assets/models", "runs/detector")
+_model_shas: dict[str, Path] | None = None
+
+
+def recording_model(trace: Path) -> Path | None:
+    """The model file a YOLO recording was made with (found by its ``detector_model_sha256`` among
+    ``assets/models`` and ``runs/detector``), ``None`` for an oracle recording or a model not found here.
+
+    A replay must read the recorded scores through *that* model's card calibration: another model's (the
+    app's) maps them to the wrong probabilities."""
+    global _model_shas
+    sha = recording_meta(trace).get("detector_model_sha256")
+    if not sha:
+        return None
+    if _model_shas is None:
+        _model_shas = {}
+        for d in _MODEL_DIRS:
+            for f in sorted((ROOT / d).rglob("*.onnx")):
+                _model_shas.setdefault(hashlib.sha256(f.read_bytes()).hexdigest(), f)
+    return _model_shas.get(str(sha))
+
+
+def replay_config(trace: Path, sets: list[str]):
+    """The :class:`~app.config.Config` to replay ``trace`` with: its detector kind, for YOLO the recording's own
+    model (its card's score calibration; ``detector.calibration=off`` with a warning when the model is not
+    here), then ``sets`` (``SECTION.KEY=VALUE``)."""
+    from app.config import Config
+
+    cfg = Config()
+    if recording_detector(trace) == "oracle":
+        cfg.set("detector.kind", "oracle")
+    else:
+        cfg.set("detector.kind", "yolo")
+        model = recording_model(trace)
+        if model is not None:
+            cfg.set("detector.model_path", str(model))
+        else:
+            print(f"warning: {trace.parent.name}: its model is not here; replayed without a score calibration",
+                  file=sys.stderr)
+            cfg.set("detector.calibration", "off")
+    for s in sets:
+        k, _, v = s.partition("=")
+        cfg.set(k, v)
+    return cfg
+
+
 def model_matches(trace: Path, model: str, current_sha: str | None = None) -> bool:
     """Whether a YOLO recording was made with ``model``: ``any``; ``current`` (the config's model file, by
     content); ``unrecorded`` (recordings from before the model's hash was written down); or a sha256 prefix."""
@@ -78,6 +124,14 @@ def suite_traces(suite: str, detector: str = "yolo", model: str = "current") -> 
 
         current = detector_model_sha256(Config().to_dict())
     files = [f for f in files if model_matches(f, model, current)]
+    # one recording per world, detector and model: the earliest (a sweep with other settings may record a
+    # world again under another cache key)
+    first: dict[tuple[str, str, str], Path] = {}
+    for f in sorted(files, key=lambda f: ((f.parent / "recording.json").stat().st_mtime, str(f))):
+        meta = recording_meta(f)
+        key = (f.parent.name.rsplit("-", 1)[0], str(meta.get("detector")), str(meta.get("detector_model_sha256")))
+        first.setdefault(key, f)
+    files = sorted(first.values())
     if suite == "all":
         return files
     from app.bench.objects import zoo_split
@@ -102,7 +156,6 @@ def print_misses(objs, truth, ev, threshold: float) -> None:
 
 
 def main() -> int:
-    from app.config import Config
     from app.ocslam.evaluation import evaluate_objects
     from app.sweep.trace import FuseInput, replay_trace
 
@@ -123,17 +176,13 @@ def main() -> int:
     if not files:
         print("no traces: run `ocslam sweep assets/sweeps/six-constants.yaml --trials 1` first", file=sys.stderr)
         return 2
-    cfg = Config()
-    cfg.set("detector.kind", "oracle" if a.detector == "oracle" else "yolo")
-    for s in a.set:
-        k, _, v = s.partition("=")
-        cfg.set(k, v)
     prof = cProfile.Profile() if a.profile else None
     total_s = total_frames = 0.0
     f1s = []
     for f in files:
         with open(f, "rb") as fh:
             tr = pickle.load(fh)
+        cfg = replay_config(f, a.set)
         frames = sum(isinstance(e, FuseInput) for e in tr.events)
         t0 = time.process_time()
         if prof:

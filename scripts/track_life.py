@@ -26,9 +26,8 @@ sys.path.insert(0, str(ROOT / "scripts"))
 
 
 def main() -> int:
-    from profile_traces import recording_detector
+    from profile_traces import replay_config
 
-    from app.config import Config
     from app.sweep.trace import Correction, filter_detections, replay_trace
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -41,11 +40,7 @@ def main() -> int:
     a = ap.parse_args()
     with open(a.trace, "rb") as fh:
         tr = pickle.load(fh)
-    cfg = Config()
-    cfg.set("detector.kind", "oracle" if recording_detector(Path(a.trace)) == "oracle" else "yolo")
-    for s in a.set:
-        k, _, v = s.partition("=")
-        cfg.set(k, v)
+    cfg = replay_config(Path(a.trace), a.set)  # the recording's detector and its model's score calibration
     conf = float(cfg.detector.confidence)
     at = tuple(float(v) for v in a.at.split(",")) if a.at else None
     near_at: dict[int, tuple[float, str, float]] = {}  # track id → (closest distance, class, stamp)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from synthetic_scene import Cylinder, default_camera
 from test_fusion_scenarios import arc, found, make, run, straight
 
@@ -292,3 +293,45 @@ def test_a_near_centre_is_not_the_object_when_the_lidar_shows_two_things():
     cand2 = Candidate(2, "ball", 0.9, "lidar_island", again, Footprint(again.mean(axis=0), 0.0, 0.2, 0.2), 2.0,
                       ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=1.0)
     assert associate(cand2, [track], 1.0, cfg) is track
+
+
+def _fragment_test_track(track_id: int, points: np.ndarray, label: str, ray_weight: float, cfg: ConsciousnessConfig):
+    """A track made from one island seen through box 0 (``ray_weight`` 0: a box cut by the image border)."""
+    c = Candidate(0, label, 0.9, "lidar_island", points, None, 2.0, ray_origin=np.array([2.9, 0.5]),
+                  ray_dir=np.array([0.0, 1.0]), ray_weight=ray_weight)
+    return create_track(track_id, c, 0.0, -1, cfg, None)
+
+
+@pytest.mark.parametrize("fits_largest", [True, False])
+def test_a_fragment_joins_a_neighbour_whose_points_overstate_its_shape(fits_largest: bool):
+    """A dog's track whose points also hold a strip of something behind it (0.8 × 0.53 m: no typical dog) and a
+    fragment of the dog's head seen only through border-cut boxes, 0.15 m beyond its end: together no typical
+    dog, but within the largest one. The fragment joins it (``fragment_fits_largest``); two tracks seen whole
+    with the same points stay two, and so does a fragment farther than a dog's length."""
+    from shapely.geometry import Polygon
+
+    from app.ocslam.candidate import FrameReport
+    from app.ocslam.collisions import resolve_track_collisions
+
+    cfg = ConsciousnessConfig()
+    cfg.fragment_fits_largest = fits_largest
+    pc = prior("dog")
+    body = np.array([[x, y] for x in np.linspace(2.6, 3.4, 9) for y in (2.37, 2.45)])
+    strip = np.array([[x, 2.9] for x in np.linspace(2.8, 3.2, 5)])
+    head = np.array([[x, y] for x in (2.3, 2.375, 2.45) for y in (2.37, 2.45)])
+    both = np.vstack([body, strip, head])
+    d = both.max(axis=0) - both.min(axis=0)
+    assert not pc.fits_typical(*d, tolerance=0.25) and pc.fits(*d, tolerance=0.1)  # the case as described
+
+    def collide(tracks):
+        rep = FrameReport(1.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon())
+        return resolve_track_collisions(list(tracks), list(tracks), 1.0, cfg, None, rep)
+
+    dog = _fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg)
+    fragment = _fragment_test_track(1, head, "dog", 0.0, cfg)
+    assert fragment.partial_only and not dog.partial_only
+    assert len(collide([dog, fragment])) == (1 if fits_largest else 2)
+    whole = _fragment_test_track(1, head, "dog", 1.0, cfg)  # the same points seen whole: a second object
+    assert len(collide([_fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg), whole])) == 2
+    far = _fragment_test_track(1, head - np.array([1.6, 0.0]), "dog", 0.0, cfg)
+    assert len(collide([_fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg), far])) == 2

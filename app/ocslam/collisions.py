@@ -261,7 +261,10 @@ def resolve_track_collisions(
                     # image border): close (touching; within the class's length for partial views)
                     # and together one object of the class
                     gap = a.prior.length[2] if (a.partial_only or b.partial_only) else thr
-                    same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=True)
+                    # a fragment (seen only through border-cut boxes) need only fit the class's largest
+                    # instance with its neighbour: the neighbour's own points may overstate its shape
+                    typical = not (cfg.fragment_fits_largest and (a.partial_only or b.partial_only))
+                    same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=typical)
                 if not same and (not a.evidence.has_points or not b.evidence.has_points):
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)
                     if len(gp.evidence.ray_origin):

@@ -446,6 +446,12 @@ class ConsciousnessConfig:
         "(a third chair between two sofas' boxes is missed in clear view)",
         live=True,
     )
+    fragment_fits_largest: bool = param(
+        True,
+        help="improved, collisions: an object seen only through boxes cut by the image border joins a same-class "
+        "neighbour within the class's length when together they fit its largest instance (not only a typical shape)",
+        live=True,
+    )
     shared_evidence_fraction: float = param(
         0.5, min=0.0, max=1.0, step=0.05,
         help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",

@@ -3,7 +3,8 @@
 The sweep's traces (``runs/sweep-cache/*/trace-*.pkl``, made by ``ocslam sweep``) are the exact
 ``Consciousness.update`` calls of one recording per world, so replaying them measures the fusion's
 per-frame cost alone. The fingerprint (a hash of every object's class, pose, size and presence) shows
-whether a change to the code kept the object maps identical.
+whether a change to the code kept the object maps identical. Each YOLO recording is replayed through its own
+model's score calibration (:func:`replay_config`), and each world once per detector and model.
 
     python scripts/profile_traces.py                       # the cached zoo-dev traces, default config
     python scripts/profile_traces.py --suite zoo-test      # the held-out half (only report it)

@@ -330,6 +330,9 @@ def test_a_fragment_joins_a_neighbour_whose_points_overstate_its_shape(fits_larg
     dog = _fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg)
     fragment = _fragment_test_track(1, head, "dog", 0.0, cfg)
     assert fragment.partial_only and not dog.partial_only
+    from app.ocslam.collisions import one_instance
+
+    assert one_instance(dog, fragment, True) and not one_instance(dog, fragment, False)
     assert len(collide([dog, fragment])) == (1 if fits_largest else 2)
     whole = _fragment_test_track(1, head, "dog", 1.0, cfg)  # the same points seen whole: a second object
     assert len(collide([_fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg), whole])) == 2

@@ -59,17 +59,22 @@ def strong_points(t: Track) -> FloatArray:
     return ev.points[ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))]
 
 
-def one_instance(a: Track, b: Track) -> bool:
+def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False) -> bool:
     """True if two same-class objects' well-seen points together fit one instance of the class (one
-    of its typical shapes; for legs seen as legs, the legs of one instance). Without points on either
-    side only their footprints can tell: True."""
+    of its typical shapes; for legs seen as legs, the legs of one instance). With ``fragment_fits_largest``,
+    when either was only seen through border-cut boxes (a fragment), its largest instance is enough (the
+    other's points may overstate its shape). Without points on either side only their footprints can
+    tell: True."""
     pa, pb = strong_points(a), strong_points(b)
     if len(pa) == 0 or len(pb) == 0:
         return True
     _th, lo, hi = min_area_rect(np.vstack([pa, pb]))
     d = hi - lo
     pc = a.prior
-    if not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
+    if fragment_fits_largest and (a.partial_only or b.partial_only):
+        if not pc.fits(float(d[0]), float(d[1]), tolerance=0.1):
+            return False
+    elif not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
         return False
     legs = pc.legged and all(t.evidence.leg_obs * 2 > t.evidence.observations for t in (a, b))
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
@@ -237,7 +242,7 @@ def resolve_track_collisions(
                     shared = _sharing(a, b, cfg)
                     if shared is None:
                         continue
-                    if not one_instance(a, b):
+                    if not one_instance(a, b, cfg.fragment_fits_largest):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own
                         loser, other_pts = (a, shared[1]) if fa.area >= fb.area else (b, shared[0])
@@ -251,7 +256,7 @@ def resolve_track_collisions(
                         break
                     continue
                 same = d < thr or overlap_fraction(fa, fb) >= ov
-                if same and cfg.point_ownership and not one_instance(a, b):
+                if same and cfg.point_ownership and not one_instance(a, b, cfg.fragment_fits_largest):
                     # overlapping, but together larger than any instance: two objects, unless each stands
                     # on the other's centre (two solid objects cannot interpenetrate: one of them holds
                     # foreign points)

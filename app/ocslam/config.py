@@ -448,8 +448,8 @@ class ConsciousnessConfig:
     )
     fragment_fits_largest: bool = param(
         True,
-        help="improved, collisions: an object seen only through boxes cut by the image border joins a same-class "
-        "neighbour within the class's length when together they fit its largest instance (not only a typical shape)",
+        help="improved, collisions: an object seen only through boxes cut by the image border and a same-class "
+        "neighbour within the class's length are one when together they fit its largest instance (not only a typical shape)",
         live=True,
     )
     shared_evidence_fraction: float = param(

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import functools
 import hashlib
 import pickle
 import pstats
@@ -37,8 +38,9 @@ def fingerprint(objs) -> str:
     return h.hexdigest()[:12]
 
 
+@functools.lru_cache(maxsize=4096)
 def recording_meta(trace: Path) -> dict:
-    """The ``recording.json`` of a cached trace's recording (``{}`` if unreadable)."""
+    """The ``recording.json`` of a cached trace's recording (``{}`` if unreadable); read once, read-only."""
     import json
 
     try:

@@ -25,6 +25,7 @@ from app.ocslam.tracks import (
     along_ray_close,
     co_observed,
     contiguous,
+    fits_instance,
     merge_tracks,
     overlap_fraction,
 )
@@ -71,10 +72,7 @@ def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False) -> boo
     _th, lo, hi = min_area_rect(np.vstack([pa, pb]))
     d = hi - lo
     pc = a.prior
-    if fragment_fits_largest and (a.partial_only or b.partial_only):
-        if not pc.fits(float(d[0]), float(d[1]), tolerance=0.1):
-            return False
-    elif not pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25):
+    if not fits_instance(pc, float(d[0]), float(d[1]), typical=not (fragment_fits_largest and (a.partial_only or b.partial_only))):
         return False
     legs = pc.legged and all(t.evidence.leg_obs * 2 > t.evidence.observations for t in (a, b))
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
@@ -265,10 +263,11 @@ def resolve_track_collisions(
                     # pieces of one object seen from different sides or only in parts (cut by the
                     # image border): close (touching; within the class's length for partial views)
                     # and together one object of the class
-                    gap = a.prior.length[2] if (a.partial_only or b.partial_only) else thr
+                    fragment = a.partial_only or b.partial_only
+                    gap = a.prior.length[2] if fragment else thr
                     # a fragment (seen only through border-cut boxes) need only fit the class's largest
                     # instance with its neighbour: the neighbour's own points may overstate its shape
-                    typical = not (cfg.fragment_fits_largest and (a.partial_only or b.partial_only))
+                    typical = not (cfg.fragment_fits_largest and fragment)
                     same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=typical)
                 if not same and (not a.evidence.has_points or not b.evidence.has_points):
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)

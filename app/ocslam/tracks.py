@@ -34,6 +34,10 @@ FloatArray = NDArray[np.float64]
 FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
 
 
+#: how many recent frames a track remembers the boxes and the clear misses of
+RECENT_FRAMES = 256
+
+
 @dataclass(eq=False)
 class Track:
     """One tracked object (``map`` frame)."""
@@ -73,13 +77,13 @@ class Track:
             return self.conf_best
         return float(c)
 
-    def saw(self, stamp: float, box: int, keep: int = 256) -> None:
+    def saw(self, stamp: float, box: int, keep: int = RECENT_FRAMES) -> None:
         self.boxes[stamp] = box
         if len(self.boxes) > keep:
             for k in sorted(self.boxes)[: len(self.boxes) - keep]:
                 del self.boxes[k]
 
-    def missed(self, stamp: float, keep: int = 256) -> None:
+    def missed(self, stamp: float, keep: int = RECENT_FRAMES) -> None:
         """A clear miss at ``stamp`` (its stamp remembered as long as :meth:`saw` remembers boxes)."""
         self.misses += 1
         self.miss_stamps.add(stamp)
@@ -151,16 +155,22 @@ def min_distance(a: FloatArray, b: FloatArray) -> float:
     return float(nearest_distances(a, b).min())
 
 
+def fits_instance(pc: ClassPrior, extent_a: float, extent_b: float, typical: bool) -> bool:
+    """True if extents fit one object of the class: one of its typical shapes (25 % tolerance) with
+    ``typical``, else its largest instance (10 %)."""
+    if typical:
+        return pc.fits_typical(extent_a, extent_b, tolerance=0.25)
+    return pc.fits(extent_a, extent_b, tolerance=0.1)
+
+
 def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typical: bool = False) -> bool:
     """True if two point sets lie within ``gap_m`` and together fit one object of the class (one of
-    its typical shapes with ``typical``)."""
+    its typical shapes with ``typical``: :func:`fits_instance`)."""
     if len(a) == 0 or len(b) == 0 or min_distance(a, b) > gap_m:
         return False
     _th, lo, hi = min_area_rect(np.vstack([a, b]))
     d = hi - lo
-    if typical:
-        return pc.fits_typical(float(d[0]), float(d[1]), tolerance=0.25)
-    return pc.fits(float(d[0]), float(d[1]), tolerance=0.1)
+    return fits_instance(pc, float(d[0]), float(d[1]), typical)
 
 
 def grid_free_fn(grid: OccupancyGrid | None) -> FreeFn | None:

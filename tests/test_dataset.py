@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -86,6 +87,20 @@ def test_sensor_effects_match_the_pointwise_chain_with_noise_on_every_channel() 
             np.testing.assert_allclose(inner.std(axis=(0, 1)), sigma, rtol=0.15, atol=0.35)
 
 
+def test_dataset_images_stored_or_compressed_hold_the_same_pixels(tmp_path: Path) -> None:
+    from app.training.dataset import png_flags
+
+    rng = np.random.default_rng(3)
+    img = np.clip(rng.normal(120.0, 30.0, (48, 64, 3)), 0, 255).astype(np.uint8)  # a noisy render
+    sizes = {}
+    for compress in (False, True):
+        f = tmp_path / f"{compress}.png"
+        assert cv2.imwrite(str(f), img, png_flags(compress))
+        np.testing.assert_array_equal(cv2.imread(str(f), cv2.IMREAD_UNCHANGED), img)
+        sizes[compress] = f.stat().st_size
+    assert sizes[False] >= img.nbytes > sizes[True]
+
+
 @pytest.mark.slow
 def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
     out = tmp_path / "ds"
@@ -126,6 +141,8 @@ def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
                 assert all(0.0 <= float(v) <= 1.0 for v in r[1:])
     samples = load_samples(out, "all")
     assert len(samples) == 11 and samples[0].load().shape == (120, 160, 3)
+    # stored uncompressed by default: at least the raw pixels' bytes
+    assert all(f.stat().st_size >= 160 * 120 * 3 for f in (out / "images").glob("*/*.png"))
 
 
 def test_overlay_mesh_file_known_answer(tmp_path: Path) -> None:

@@ -66,3 +66,35 @@ def test_the_same_path_as_the_reference_a_star(seed, h, w, density, with_cost):
     b = (int(rng.integers(h)), int(rng.integers(w)))
     free[a] = free[b] = True
     assert grid_path(free, a, b, cost) == _reference_a_star(free, a, b, cost)
+
+
+def _reference_pull(planner, pts):
+    """String pulling by asking ``clear`` of each later point from the last one back (before it was vectorised)."""
+    out, i = [pts[0]], 0
+    while i < len(pts) - 1:
+        j = len(pts) - 1
+        while j > i + 1 and not planner.clear(pts[i], pts[j]):
+            j -= 1
+        out.append(pts[j])
+        i = j
+    return out
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 60), chunk=st.sampled_from([1, 3, 16]))
+def test_string_pulling_keeps_the_reference_points(seed, n, chunk):
+    """Random walks (repeated points included) through a room with pillars: the same points, whatever the chunk."""
+    from app.world.planner import Planner
+    from app.world.types import Wall, World, WorldObject
+
+    rng = np.random.default_rng(seed)
+    world = World(
+        name="pillars",
+        walls=[Wall((0.0, 0.0), (6.0, 0.0)), Wall((6.0, 0.0), (6.0, 4.0)), Wall((6.0, 4.0), (0.0, 4.0)),
+               Wall((0.0, 4.0), (0.0, 0.0))],
+        objects=[WorldObject("ball", "play_ball", float(x), float(y)) for x, y in rng.uniform([1, 1], [5, 3], (3, 2))],
+    )
+    planner = Planner(world, clearance=0.15, res=0.1)
+    steps = rng.choice([-0.1, 0.0, 0.1], size=(n, 2))
+    pts = [tuple(p) for p in np.round(np.cumsum(steps, axis=0) + [3.0, 2.0], 3)]
+    assert planner.pull_string(pts, chunk=chunk) == _reference_pull(planner, pts)

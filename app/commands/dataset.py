@@ -48,6 +48,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "app's renderer where it loads, Mesa's llvmpipe), auto (egl where it loads)",
     )
     p.add_argument("--no-randomize", action="store_true", help="no domain randomisation (plain renders)")
+    p.add_argument(
+        "--compress-images",
+        action="store_true",
+        help="compressed PNG images (about 60 %% of the size, 2 ms more an image; default: PNG stored uncompressed, "
+        "the same pixels)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -95,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         apartment_images=args.apartment_images,
         label_filter=LabelFilter(args.min_pixels, args.min_visible, args.min_box, min_in_frame_fraction=args.min_in_frame),
         randomize=not args.no_randomize,
+        compress_images=args.compress_images,
         families=families,
         command=command_line(),
         **extra,

@@ -30,47 +30,62 @@ def grid_path(
 ) -> list[tuple[int, int]] | None:
     """8-connected A* on a boolean grid (row, col); ``cost`` (≥ 1) multiplies the step length.
 
-    Cells are flat indices ``r·W + c`` on Python lists (the heap breaks ties of equal ``f`` by that index,
-    i.e. by ``(r, c)``), and an entry whose cell has since been reached more cheaply is skipped (that cell was
-    expanded with its better ``g`` first; expanding it again could not improve a neighbour): the path is the
-    one a tuple-keyed A* returns, faster."""
+    Cells are flat indices of the grid padded with a blocked border (so a neighbour needs no bounds test) on
+    Python lists; the heap breaks ties of equal ``f`` by that index, i.e. by ``(r, c)``, and an entry whose cell
+    has since been reached more cheaply is skipped (that cell was expanded with its better ``g`` first;
+    expanding it again could not improve a neighbour): the path is the one a tuple-keyed A* returns, faster."""
     H, W = free.shape
     if not (free[a] and free[b]):
         return None
-    ok = free.ravel().tolist()
-    step_cost = None if cost is None else np.asarray(cost, dtype=np.float64).ravel().tolist()
-    br, bc = b
-    goal = br * W + bc
-    start = a[0] * W + a[1]
+    Wp = W + 2
+    padded = np.zeros((H + 2, Wp), dtype=bool)
+    padded[1:-1, 1:-1] = free
+    ok = padded.ravel().tolist()
+    if cost is None:
+        step_cost = None
+    else:
+        c_pad = np.ones((H + 2, Wp), dtype=np.float64)
+        c_pad[1:-1, 1:-1] = cost
+        step_cost = c_pad.ravel().tolist()
+    br, bc = b[0] + 1, b[1] + 1
+    goal = br * Wp + bc
+    start = (a[0] + 1) * Wp + a[1] + 1
     g: dict[int, float] = {start: 0.0}
     came: dict[int, int] = {}
     openq: list[tuple[float, int]] = [(0.0, start)]
-    steps = [(-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0), (-1, -1, 1.414), (-1, 1, 1.414), (1, -1, 1.414), (1, 1, 1.414)]
+    straight = [(-Wp, -1, 0), (Wp, 1, 0), (-1, 0, -1), (1, 0, 1)]
+    diagonal = [(-Wp - 1, -1, -1), (-Wp + 1, -1, 1), (Wp - 1, 1, -1), (Wp + 1, 1, 1)]
     hypot, heappush, heappop = math.hypot, heapq.heappush, heapq.heappop
     while openq:
         f, cur = heappop(openq)
         if cur == goal:
-            path = [(cur // W, cur % W)]
+            path = [(cur // Wp - 1, cur % Wp - 1)]
             while cur in came:
                 cur = came[cur]
-                path.append((cur // W, cur % W))
+                path.append((cur // Wp - 1, cur % Wp - 1))
             return path[::-1]
-        r, c = divmod(cur, W)
+        r, c = divmod(cur, Wp)
         gc = g[cur]
         if f > gc + hypot(r - br, c - bc):  # a stale entry
             continue
-        for dr, dc, step in steps:
-            nr, nc = r + dr, c + dc
-            if not (0 <= nr < H and 0 <= nc < W):
+        for dn, dr, dc in straight:
+            n = cur + dn
+            if not ok[n]:
                 continue
-            n = cur + dr * W + dc
-            if not ok[n] or (dr and dc and not (ok[cur + dr * W] and ok[cur + dc])):
-                continue
-            ng = gc + step * (1.0 if step_cost is None else step_cost[n])
+            ng = gc + 1.0 * (1.0 if step_cost is None else step_cost[n])
             if ng < g.get(n, 1e18):
                 g[n] = ng
                 came[n] = cur
-                heappush(openq, (ng + hypot(nr - br, nc - bc), n))
+                heappush(openq, (ng + hypot(r + dr - br, c + dc - bc), n))
+        for dn, dr, dc in diagonal:
+            n = cur + dn
+            if not (ok[n] and ok[cur + dr * Wp] and ok[cur + dc]):
+                continue
+            ng = gc + 1.414 * (1.0 if step_cost is None else step_cost[n])
+            if ng < g.get(n, 1e18):
+                g[n] = ng
+                came[n] = cur
+                heappush(openq, (ng + hypot(r + dr - br, c + dc - bc), n))
     return None
 
 
@@ -128,14 +143,33 @@ class Planner:
         cells = grid_path(self.free, ca, cb, self.cost)
         if cells is None:
             return None
-        pts = [self.point(c) for c in cells]
-        # string pulling: keep the farthest point reachable in a straight, clear line
+        return self.pull_string([self.point(c) for c in cells])
+
+    def pull_string(self, pts: list[tuple[float, float]], chunk: int = 16) -> list[tuple[float, float]]:
+        """String pulling: from each kept point, the farthest later point reachable in a :meth:`clear` line.
+
+        The same points as asking :meth:`clear` of each later point from the last one back, with the points'
+        clearances computed once and the segments measured ``chunk`` at a time (one GEOS call each)."""
+        n = len(pts)
+        if n < 3:
+            return list(pts)
+        P = np.asarray(pts, dtype=np.float64)
+        d_pt = shapely.distance(self.blocking, shapely.points(P))
         out = [pts[0]]
         i = 0
-        while i < len(pts) - 1:
-            j = len(pts) - 1
-            while j > i + 1 and not self.clear(pts[i], pts[j]):
-                j -= 1
+        while i < n - 1:
+            j = i + 1
+            for hi in range(n - 1, i + 1, -chunk):  # the later points, farthest first, a chunk at a time
+                js = np.arange(hi, max(hi - chunk, i + 1), -1)
+                need = np.minimum(np.minimum(self.preferred, d_pt[i]), d_pt[js])
+                need = np.maximum(need - 0.01, self.clearance + 1e-3)
+                same = np.all(P[js] == P[i], axis=1)  # a segment of no length is its point
+                segs = shapely.linestrings(np.stack([np.broadcast_to(P[i], (len(js), 2)), P[js]], axis=1))
+                d_seg = np.where(same, d_pt[i], shapely.distance(self.blocking, segs))
+                ok = d_seg >= need
+                if ok.any():
+                    j = int(js[int(np.argmax(ok))])
+                    break
             out.append(pts[j])
             i = j
         return out

@@ -338,3 +338,34 @@ def test_a_fragment_joins_a_neighbour_whose_points_overstate_its_shape(fits_larg
     assert len(collide([_fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg), whole])) == 2
     far = _fragment_test_track(1, head - np.array([1.6, 0.0]), "dog", 0.0, cfg)
     assert len(collide([_fragment_test_track(0, np.vstack([body, strip]), "dog", 1.0, cfg), far])) == 2
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_a_door_strip_at_the_image_edge_over_a_bookcases_side_is_the_bookcase(enabled: bool):
+    """A bookcase seen whole (its front, 1 m) and a door seen only through boxes cut by the image border whose
+    points are the bookcase's side (0.3 m from its front's end toward the wall): no door
+    (``border_fragment_of_other``). The same strip seen whole, a strip half a metre off, and a chair's strip at
+    the same place (free-standing objects touch) all stay."""
+    from shapely.geometry import Polygon
+
+    from app.ocslam.candidate import FrameReport
+    from app.ocslam.collisions import border_piece_of, resolve_track_collisions
+
+    cfg = ConsciousnessConfig()
+    cfg.border_fragment_of_other = enabled
+    front = np.array([[x, 2.0] for x in np.linspace(0.0, 1.0, 21)])
+    side = np.array([[1.03, y] for y in np.linspace(2.05, 2.3, 6)])
+
+    def collide(*tracks):
+        rep = FrameReport(1.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon())
+        return [t.label for t in resolve_track_collisions(list(tracks), list(tracks), 1.0, cfg, None, rep)]
+
+    def shelf():
+        return _fragment_test_track(0, front, "shelf", 1.0, cfg)
+
+    door = _fragment_test_track(1, side, "door", 0.0, cfg)
+    assert door.partial_only and border_piece_of(shelf(), door, cfg) is door
+    assert collide(shelf(), door) == (["shelf"] if enabled else ["shelf", "door"])
+    assert collide(shelf(), _fragment_test_track(1, side, "door", 1.0, cfg)) == ["shelf", "door"]
+    assert collide(shelf(), _fragment_test_track(1, side + [0.5, 0.0], "door", 0.0, cfg)) == ["shelf", "door"]
+    assert collide(shelf(), _fragment_test_track(1, side, "chair", 0.0, cfg)) == ["shelf", "chair"]

@@ -172,6 +172,21 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                 rep.reject("collision")
 
 
+def border_piece_of(a: Track, b: Track, cfg: ConsciousnessConfig) -> Track | None:
+    """Of two objects of different classes, the one that is a piece of the other, or None: an object that
+    sits in a wall (a door, ``ClassPrior.on_wall``) only ever seen through boxes cut by the image border,
+    whose points continue a free-standing object seen whole (within the island gap) into no more than that
+    class's largest instance. A box at the image's edge shows only a strip of what it boxed (a bookcase's
+    side taken for a door); a door's points continue a wall, not a piece of furniture."""
+    if a.partial_only == b.partial_only:
+        return None
+    piece, whole = (a, b) if a.partial_only else (b, a)
+    if not piece.prior.on_wall or whole.prior.on_wall:
+        return None  # free-standing objects touch (a chair pushed to a table's leg); a door is part of a wall
+    gap = float(cfg.island_threshold_m)
+    return piece if contiguous(piece.evidence.points, whole.evidence.points, whole.prior, gap) else None
+
+
 def _sharing(a: Track, b: Track, cfg: ConsciousnessConfig) -> tuple[FloatArray, FloatArray] | None:
     """Both objects' well-seen points (:func:`strong_points`) if at least ``shared_evidence_fraction`` of
     one's lie on the other's, else None."""
@@ -282,6 +297,13 @@ def resolve_track_collisions(
                 # them. Otherwise (two labels on one object) the one with more evidence stays.
                 shared = _sharing(a, b, cfg)
                 if shared is None:
+                    piece = border_piece_of(a, b, cfg) if cfg.border_fragment_of_other else None
+                    if piece is None:
+                        continue
+                    removed.add(piece.id)
+                    rep.removed += 1
+                    if piece is a:
+                        break
                     continue
                 (small, small_fp, small_pts), (big, big_fp) = (
                     ((a, fa, shared[0]), (b, fb)) if fa.area <= fb.area else ((b, fb, shared[1]), (a, fa))

@@ -452,6 +452,13 @@ class ConsciousnessConfig:
         "neighbour within the class's length are one when together they fit its largest instance (not only a typical shape)",
         live=True,
     )
+    border_fragment_of_other: bool = param(
+        True,
+        help="improved, collisions: a door (an object in a wall) seen only through boxes cut by the image border whose "
+        "points continue a wholly seen free-standing object (within the island gap, together no larger than that class's "
+        "largest instance) is a piece of that object, not a door (a door box at the image's edge over a bookcase's side)",
+        live=True,
+    )
     shared_evidence_fraction: float = param(
         0.5, min=0.0, max=1.0, step=0.05,
         help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",

@@ -75,16 +75,10 @@ PNG_STORED = (cv2.IMWRITE_PNG_COMPRESSION, 0, cv2.IMWRITE_PNG_FILTER, cv2.IMWRIT
 TEXTURE_KINDS = ("planks", "tiles", "checker", "carpet", "stripes", "marble", "plain")
 
 
-def write_quad_obj(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]], path: Path, material: str | None = None) -> Path:
-    """Write planar quads ``(origin, u_vec, v_vec, tile)`` (corners ``o``, ``o+u``, ``o+u+v``, ``o+v``,
-    texture repeating every ``tile`` metres) as a Wavefront OBJ mesh with UVs and normals, using the first
-    material of the ``material`` file (beside it) if given; returns ``path``.
-
-    A mesh *file*, not pybullet's vertex arrays: the EGL renderer plugin draws only meshes it can load
-    by file name (vertex-array meshes are skipped with "issue extracting mesh"), TinyRenderer draws both."""
-    lines = ["# OCSLAM dataset overlay (app/training/randomization.py)"]
-    if material:
-        lines += [f"mtllib {material}", "usemtl m"]
+def quad_obj_geometry(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]) -> str:
+    """The vertex, UV, normal and face lines of planar quads ``(origin, u_vec, v_vec, tile)`` as Wavefront OBJ
+    text (corners ``o``, ``o+u``, ``o+u+v``, ``o+v``; the texture repeats every ``tile`` metres)."""
+    lines = []
     faces = []
     for q, (o, u, v, tile) in enumerate(quads):
         n = np.cross(u, v)
@@ -97,8 +91,24 @@ def write_quad_obj(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]
         k = 4 * q + 1  # OBJ indices are 1-based; vertex k has uv k and normal k
         faces += [(k, k + 1, k + 2), (k, k + 2, k + 3)]
     lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in faces]
+    return "\n".join(lines) + "\n"
+
+
+def write_quad_obj(
+    quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]], path: Path, material: str | None = None,
+    geometry: str | None = None,
+) -> Path:
+    """Write planar quads (:func:`quad_obj_geometry`, or its text ``geometry`` made before for the same quads)
+    as a Wavefront OBJ mesh with UVs and normals, using the first material of the ``material`` file (beside it)
+    if given; returns ``path``.
+
+    A mesh *file*, not pybullet's vertex arrays: the EGL renderer plugin draws only meshes it can load
+    by file name (vertex-array meshes are skipped with "issue extracting mesh"), TinyRenderer draws both."""
+    head = ["# OCSLAM dataset overlay (app/training/randomization.py)"]
+    if material:
+        head += [f"mtllib {material}", "usemtl m"]
     path = Path(path)
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(head) + "\n" + (quad_obj_geometry(quads) if geometry is None else geometry))
     return path
 
 
@@ -161,6 +171,7 @@ class Randomizer:
         self.distractor_bodies: list[int] = []
         self.distractor_discs: list[tuple[float, float, float]] = []
         self._tex_count = 0
+        self._geometry: dict[int, str] = {}  # id(quads) → OBJ geometry text (the overlays' quads are fixed per world)
         self.original_rgba = {
             b: tuple(p.getVisualShapeData(b, physicsClientId=self.cid)[0][7])
             for ids in sim.object_body_ids.values()
@@ -219,7 +230,10 @@ class Randomizer:
         # stored, not compressed: a temporary file read once by pybullet (the same pixels, 1 ms less)
         cv2.imwrite(str(self.tmpdir / f"tex{k}.png"), img[:, :, ::-1], list(PNG_STORED))
         (self.tmpdir / f"overlay{k}.mtl").write_text(f"newmtl m\nKd 1 1 1\nmap_Kd tex{k}.png\n")
-        obj = write_quad_obj(quads, self.tmpdir / f"overlay{k}.obj", material=f"overlay{k}.mtl")
+        geometry = self._geometry.get(id(quads))
+        if geometry is None:  # the floor's and the walls' quads stay a world's: their mesh text is made once
+            geometry = self._geometry[id(quads)] = quad_obj_geometry(quads)
+        obj = write_quad_obj(quads, self.tmpdir / f"overlay{k}.obj", material=f"overlay{k}.mtl", geometry=geometry)
         vs = p.createVisualShape(p.GEOM_MESH, fileName=str(obj), physicsClientId=cid)
         return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
 

@@ -87,3 +87,15 @@ def test_same_data_is_the_same_file_or_the_same_text(tmp_path: Path) -> None:
     assert _same_data(str(copy), a / "data.yaml")  # another machine's path to the same dataset
     assert not _same_data(str(b / "data.yaml"), a / "data.yaml")
     assert not _same_data(str(tmp_path / "gone.yaml"), a / "data.yaml") and not _same_data(None, a / "data.yaml")
+
+
+def test_a_new_run_never_overwrites_the_saved_runs_checkpoint(tmp_path: Path) -> None:
+    from app.commands.train_detector import run_checkpoint
+
+    default, run_dir = tmp_path / "assets" / "detector-train.pt", tmp_path / "runs" / "ft"
+    assert run_checkpoint(None, False, default, run_dir) == default  # nothing saved yet: the committed place
+    default.parent.mkdir(parents=True)
+    default.write_bytes(b"a saved run")
+    assert run_checkpoint(None, False, default, run_dir) == run_dir / "train.pt"  # a new run: its own folder
+    assert run_checkpoint(None, True, default, run_dir) == default  # --resume continues the saved run
+    assert run_checkpoint(tmp_path / "x.pt", False, default, run_dir) == tmp_path / "x.pt"  # named: the user's choice

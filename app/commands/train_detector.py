@@ -9,7 +9,8 @@ hour on 2 cores with the defaults (see docs/detector.md):
 Without a dataset at --data (default datasets/sim) it renders one with that recipe first.
 
 One long schedule over many sessions: every epoch's full state (weights, optimizer, learning-rate
-schedule, epoch counter) is copied to --checkpoint (default assets/models/detector-train.pt), and
+schedule, epoch counter) is copied to --checkpoint (default assets/models/detector-train.pt; a new run
+writes its own in its run folder when a run is already saved there, and says so), and
 
     ocslam train-detector --resume [--epochs TOTAL] [--hours H]
 
@@ -118,7 +119,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true",
                    help="continue the run saved in --checkpoint (optimizer, LR schedule, epoch counter)")
     p.add_argument("--checkpoint", type=Path, default=None,
-                   help="resumable checkpoint written every epoch (default: assets/models/detector-train.pt)")
+                   help="resumable checkpoint written every epoch (default: assets/models/detector-train.pt, which "
+                   "--resume continues; a new run writes its own in its run folder when a run is saved there)")
     p.add_argument("--fit-schedule", action="store_true",
                    help="with --resume and --hours: after this session's first epoch, move the schedule's end to the "
                         "last epoch the budget holds, so the learning rate anneals fully within it (a lent machine)")
@@ -137,6 +139,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="after training: the int8 inference model made from the trained one (card beside it)")
     p.add_argument("--no-int8", action="store_true", help="after training: leave the app's model as it is")
     p.add_argument("--static", default="224x192", help="with --optimize: static input W×H (the app's 320×240 → 224×192)")
+
+
+def run_checkpoint(given: Path | None, resume: bool, default: Path, run_dir: Path) -> Path:
+    """Where a run's resumable checkpoint is written every epoch: ``given`` (``--checkpoint``); else the committed
+    ``default``, which ``--resume`` continues; a *new* run writes it only if no run is saved there yet, and
+    otherwise in its own run folder (``run_dir/train.pt``): starting a run never overwrites another's."""
+    if given is not None:
+        return Path(given)
+    if resume or not Path(default).exists():
+        return Path(default)
+    return Path(run_dir) / "train.pt"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -209,7 +222,11 @@ def run(args: argparse.Namespace) -> int:
     )
     from app.config import PROJECT_ROOT
 
-    opts.checkpoint = args.checkpoint or PROJECT_ROOT / "assets" / "models" / "detector-train.pt"
+    opts.checkpoint = run_checkpoint(args.checkpoint, args.resume, PROJECT_ROOT / "assets" / "models" / "detector-train.pt",
+                                     Path(args.runs if args.runs is not None else opts.runs_dir) / opts.name)
+    if args.checkpoint is None and not args.resume and opts.checkpoint.parent != PROJECT_ROOT / "assets" / "models":
+        print(f"checkpoint: {opts.checkpoint} (assets/models/detector-train.pt holds another run; continue this one with "
+              f"--resume --checkpoint {opts.checkpoint})")
     opts.session_epochs = args.session_epochs
     from app.config import PROJECT_ROOT as _ROOT
 

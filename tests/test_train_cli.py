@@ -58,8 +58,10 @@ def test_combine_datasets_refuses_other_classes(tmp_path: Path) -> None:
     [
         (["--data", "{a}", "--data", "{missing}"], "no dataset (data.yaml) at"),
         (["--data", "{a}", "--lr0", "2"], "--lr0 must be in"),
+        (["--data", "{a}", "--lr0", "0.002"], "--lr0 needs --optimizer"),
+        (["--data", "{a}", "--lr0", "0.002", "--optimizer", "auto"], "--lr0 needs --optimizer"),
         (["--data", "{a}", "--warmup-epochs", "-1"], "--warmup-epochs must be in"),
-        (["--data", "{a}", "--resume", "--lr0", "0.001"], "--resume continues the saved run's schedule"),
+        (["--data", "{a}", "--resume", "--lr0", "0.001", "--optimizer", "AdamW"], "--resume continues the saved run's schedule"),
         (["--data", "{a}", "--device", "cuda:zero"], "--device must be cpu or CUDA device indices"),
         (["--data", "{a}", "--batch", "0"], "--batch must be at least 1"),
         (["--data", "{a}", "--hours", "0", "--fit-schedule"], "--fit-schedule needs --hours"),

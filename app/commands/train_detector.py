@@ -196,6 +196,10 @@ def run(args: argparse.Namespace) -> int:
             return 2
     extra = {k: v for k, v in (("lr0", args.lr0), ("warmup_epochs", args.warmup_epochs), ("optimizer", args.optimizer))
              if v is not None}
+    if args.lr0 is not None and args.optimizer in (None, "auto"):
+        print("ocslam: error: --lr0 needs --optimizer SGD, AdamW or Adam (with auto, ultralytics picks its own rate and "
+              "ignores --lr0)", file=sys.stderr)
+        return 2
     if args.resume and extra:
         print("ocslam: error: --resume continues the saved run's schedule; --lr0/--warmup-epochs/--optimizer "
               "apply to a new run", file=sys.stderr)

@@ -226,9 +226,11 @@ def run(args: argparse.Namespace) -> int:
     )
     from app.config import PROJECT_ROOT
 
-    opts.checkpoint = run_checkpoint(args.checkpoint, args.resume, PROJECT_ROOT / "assets" / "models" / "detector-train.pt",
-                                     Path(args.runs if args.runs is not None else opts.runs_dir) / opts.name)
-    if args.checkpoint is None and not args.resume and opts.checkpoint.parent != PROJECT_ROOT / "assets" / "models":
+    if args.runs is not None:
+        opts.runs_dir = args.runs
+    default_checkpoint = PROJECT_ROOT / "assets" / "models" / "detector-train.pt"
+    opts.checkpoint = run_checkpoint(args.checkpoint, args.resume, default_checkpoint, Path(opts.runs_dir) / opts.name)
+    if args.checkpoint is None and opts.checkpoint != default_checkpoint:
         print(f"checkpoint: {opts.checkpoint} (assets/models/detector-train.pt holds another run; continue this one with "
               f"--resume --checkpoint {opts.checkpoint})")
     opts.session_epochs = args.session_epochs
@@ -236,8 +238,6 @@ def run(args: argparse.Namespace) -> int:
 
     # The trained float model goes beside the app's int8 one, which is made from it afterwards.
     opts.out_model = args.out if args.out is not None else _ROOT / "assets" / "models" / "detector-float.onnx"
-    if args.runs is not None:
-        opts.runs_dir = args.runs
     if args.data.is_dir() and not (args.data / "data.yaml").exists() and any(args.data.iterdir()):
         print(f"ocslam train-detector: {args.data} exists but has no data.yaml", file=sys.stderr)
         return 2

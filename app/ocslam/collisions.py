@@ -298,12 +298,11 @@ def resolve_track_collisions(
                 shared = _sharing(a, b, cfg)
                 if shared is None:
                     piece = border_piece_of(a, b, cfg) if cfg.border_fragment_of_other else None
-                    if piece is None:
-                        continue
-                    removed.add(piece.id)
-                    rep.removed += 1
-                    if piece is a:
-                        break
+                    if piece is not None:
+                        removed.add(piece.id)
+                        rep.removed += 1
+                        if piece is a:
+                            break
                     continue
                 (small, small_fp, small_pts), (big, big_fp) = (
                     ((a, fa, shared[0]), (b, fb)) if fa.area <= fb.area else ((b, fb, shared[1]), (a, fa))

@@ -91,16 +91,12 @@ def quad_obj_geometry(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, floa
         k = 4 * q + 1  # OBJ indices are 1-based; vertex k has uv k and normal k
         faces += [(k, k + 1, k + 2), (k, k + 2, k + 3)]
     lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in faces]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" if lines else ""
 
 
-def write_quad_obj(
-    quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]], path: Path, material: str | None = None,
-    geometry: str | None = None,
-) -> Path:
-    """Write planar quads (:func:`quad_obj_geometry`, or its text ``geometry`` made before for the same quads)
-    as a Wavefront OBJ mesh with UVs and normals, using the first material of the ``material`` file (beside it)
-    if given; returns ``path``.
+def write_mesh_obj(geometry: str, path: Path, material: str | None = None) -> Path:
+    """Write OBJ ``geometry`` text (:func:`quad_obj_geometry`) as a Wavefront OBJ mesh file, using the first
+    material of the ``material`` file (beside it) if given; returns ``path``.
 
     A mesh *file*, not pybullet's vertex arrays: the EGL renderer plugin draws only meshes it can load
     by file name (vertex-array meshes are skipped with "issue extracting mesh"), TinyRenderer draws both."""
@@ -108,8 +104,13 @@ def write_quad_obj(
     if material:
         head += [f"mtllib {material}", "usemtl m"]
     path = Path(path)
-    path.write_text("\n".join(head) + "\n" + (quad_obj_geometry(quads) if geometry is None else geometry))
+    path.write_text("\n".join(head) + "\n" + geometry)
     return path
+
+
+def write_quad_obj(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]], path: Path, material: str | None = None) -> Path:
+    """Write planar quads (:func:`quad_obj_geometry`) as a Wavefront OBJ mesh file (:func:`write_mesh_obj`)."""
+    return write_mesh_obj(quad_obj_geometry(quads), path, material)
 
 
 @functools.lru_cache(maxsize=4)
@@ -171,7 +172,6 @@ class Randomizer:
         self.distractor_bodies: list[int] = []
         self.distractor_discs: list[tuple[float, float, float]] = []
         self._tex_count = 0
-        self._geometry: dict[int, str] = {}  # id(quads) → OBJ geometry text (the overlays' quads are fixed per world)
         self.original_rgba = {
             b: tuple(p.getVisualShapeData(b, physicsClientId=self.cid)[0][7])
             for ids in sim.object_body_ids.values()
@@ -184,9 +184,10 @@ class Randomizer:
         #: the world's ``(xmin, ymin, xmax, ymax)``, once (every viewpoint and distractor draw reads it)
         self.bounds = sim.world.bounds()
         self._blocking = None
-        # the floor's and the walls' quads; their textured meshes are made by randomize_scene
-        self.floor_quads = self._floor_quads()
-        self.wall_quads = self._wall_quads()
+        # the floor's and the walls' quads as OBJ text, made once a world (each re-randomisation only gives them
+        # a new material); their textured meshes are made by randomize_scene
+        self.floor_mesh = quad_obj_geometry(self._floor_quads())
+        self.wall_mesh = quad_obj_geometry(self._wall_quads())
         self.floor_overlay: int | None = None
         self.wall_overlay: int | None = None
 
@@ -214,15 +215,15 @@ class Randomizer:
                         quads.append((base, u, v, 1.0))
         return quads
 
-    def _overlay(self, old: int | None, quads: list, kinds: Sequence[str]) -> int | None:
-        """A new textured overlay body over ``quads`` (removing ``old``): a texture of one of ``kinds``
+    def _overlay(self, old: int | None, mesh: str, kinds: Sequence[str]) -> int | None:
+        """A new textured overlay body of the OBJ ``mesh`` text (:func:`quad_obj_geometry`; removing ``old``): a texture of one of ``kinds``
         drawn now, named by the overlay's own material file. The EGL plugin numbers textures on its own,
         so a ``textureUniqueId`` given to ``changeVisualShape`` shows the wrong one (or none) there; a
         texture read with its mesh is right in both renderers (TinyRenderer: the same pixels)."""
         p, cid = self.p, self.cid
         if old is not None:
             p.removeBody(old, physicsClientId=cid)
-        if not quads:
+        if not mesh:
             return None
         img = make_texture(str(self.rng.choice(list(kinds))), self.rng)
         k = self._tex_count
@@ -230,10 +231,7 @@ class Randomizer:
         # stored, not compressed: a temporary file read once by pybullet (the same pixels, 1 ms less)
         cv2.imwrite(str(self.tmpdir / f"tex{k}.png"), img[:, :, ::-1], list(PNG_STORED))
         (self.tmpdir / f"overlay{k}.mtl").write_text(f"newmtl m\nKd 1 1 1\nmap_Kd tex{k}.png\n")
-        geometry = self._geometry.get(id(quads))
-        if geometry is None:  # the floor's and the walls' quads stay a world's: their mesh text is made once
-            geometry = self._geometry[id(quads)] = quad_obj_geometry(quads)
-        obj = write_quad_obj(quads, self.tmpdir / f"overlay{k}.obj", material=f"overlay{k}.mtl", geometry=geometry)
+        obj = write_mesh_obj(mesh, self.tmpdir / f"overlay{k}.obj", material=f"overlay{k}.mtl")
         vs = p.createVisualShape(p.GEOM_MESH, fileName=str(obj), physicsClientId=cid)
         return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
 
@@ -241,8 +239,8 @@ class Randomizer:
     def randomize_scene(self) -> None:
         p, cid, rng = self.p, self.cid, self.rng
         # floor and walls: a texture (or plain colour) on the overlays
-        self.floor_overlay = self._overlay(self.floor_overlay, self.floor_quads, TEXTURE_KINDS)
-        self.wall_overlay = self._overlay(self.wall_overlay, self.wall_quads, ("plain", "plain", "stripes", "tiles", "marble", "carpet"))
+        self.floor_overlay = self._overlay(self.floor_overlay, self.floor_mesh, TEXTURE_KINDS)
+        self.wall_overlay = self._overlay(self.wall_overlay, self.wall_mesh, ("plain", "plain", "stripes", "tiles", "marble", "carpet"))
         # object colours: jitter every part around its catalogue colour, sometimes a bold new hue
         for b, rgba in self.original_rgba.items():
             if rng.random() < 0.12:

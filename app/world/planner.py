@@ -41,12 +41,10 @@ def grid_path(
     padded = np.zeros((H + 2, Wp), dtype=bool)
     padded[1:-1, 1:-1] = free
     ok = padded.ravel().tolist()
-    if cost is None:
-        step_cost = None
-    else:
-        c_pad = np.ones((H + 2, Wp), dtype=np.float64)
+    c_pad = np.ones((H + 2, Wp), dtype=np.float64)  # no cost: every step at its length (x·1.0 is x exactly)
+    if cost is not None:
         c_pad[1:-1, 1:-1] = cost
-        step_cost = c_pad.ravel().tolist()
+    step_cost = c_pad.ravel().tolist()
     br, bc = b[0] + 1, b[1] + 1
     goal = br * Wp + bc
     start = (a[0] + 1) * Wp + a[1] + 1
@@ -72,7 +70,7 @@ def grid_path(
             n = cur + dn
             if not ok[n]:
                 continue
-            ng = gc + 1.0 * (1.0 if step_cost is None else step_cost[n])
+            ng = gc + step_cost[n]
             if ng < g.get(n, 1e18):
                 g[n] = ng
                 came[n] = cur
@@ -81,7 +79,7 @@ def grid_path(
             n = cur + dn
             if not (ok[n] and ok[cur + dr * Wp] and ok[cur + dc]):
                 continue
-            ng = gc + 1.414 * (1.0 if step_cost is None else step_cost[n])
+            ng = gc + 1.414 * step_cost[n]
             if ng < g.get(n, 1e18):
                 g[n] = ng
                 came[n] = cur

@@ -211,10 +211,15 @@ class PathFollower:
         t = np.clip(t, 0.0, 1.0)
         q = aa + t[:, None] * d
         dist = np.linalg.norm(q - p, axis=1)
-        i = int(np.argmin(dist))
+        s_all = self._cum[k0:k1] + t * np.sqrt(L2)
+        # progress is continuous: a segment further along than a lookahead and a metre from the last projection
+        # is not where the robot is, even where the path passes there again (the way back of an out-and-back route),
+        # and of the segments about as near as the nearest, the robot is on the one nearest its last progress
+        dist = np.where((s_all > self._last_s + self.lookahead_m + 1.0) & (np.arange(k1 - k0) > 0), np.inf, dist)
+        near = np.flatnonzero(dist <= dist.min() + 0.05)
+        i = int(near[np.argmin(np.abs(s_all[near] - self._last_s))])
         k = k0 + i
-        s = self._cum[k] + t[i] * math.sqrt(L2[i])
-        return k, float(s), float(dist[i])
+        return k, float(s_all[i]), float(dist[i])
 
     def _point_at(self, s: float) -> NDArray[np.float64]:
         assert self.path is not None
@@ -305,7 +310,9 @@ class PathFollower:
         # pure pursuit: curvature of the arc through the lookahead point
         kappa = 2.0 * t_base[1] / (ld * ld) if ld > 1e-9 else 0.0
         v = self.max_linear_mps
-        dist_left = min(d_goal, remaining + d_goal)
+        # slow down for the goal by the path left to it, not the straight line: a route that ends where it starts
+        # would otherwise crawl from its start
+        dist_left = max(remaining, 0.0) if not last_seg else min(d_goal, max(remaining, 0.0))
         v = min(v, max(self.min_linear_mps, self.max_linear_mps * dist_left / self.slowdown_distance_m))
         if math.isfinite(along):
             room = (along - self.stop_distance_m) / self.obstacle_slowdown_m
@@ -357,8 +364,8 @@ class RouteFollower:
     """Visit ``(N, 2)`` waypoints (``map`` frame) in order with a :class:`PathFollower`.
 
     The robot follows the polyline ``[start, w_k, …, w_N-1]`` from the next unvisited waypoint ``w_k``.
-    A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it or its
-    progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
+    A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it (the path then
+    starts again from the robot) or its progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
     current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
     skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
 
@@ -408,11 +415,16 @@ class RouteFollower:
         if self.follower.path is None:
             self._restart(p)
         n = len(self.waypoints)
+        reached = self.current
         while (
             self.current < n - 1
             and np.linalg.norm(self.waypoints[self.current] - p) <= self.waypoint_tolerance_m
         ):
             self.current += 1
+        if self.current != reached:
+            # a waypoint reached leaves the path: the robot heads from where it is to the next one (where the route
+            # turns back on itself, the pursuit point a lookahead along the old path would lie at the robot)
+            self._restart(p)
         twist = self.follower.compute(T_map_base, scan, T_base_scan)
         self.current = max(self.current, min(n - 1, self._k0 + self.follower.progress_index))
         if self.follower.status == ARRIVED:

@@ -47,6 +47,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="camera renderer: tiny (TinyRenderer, the committed models' data; default, or OCSLAM_RENDERER), egl (the "
         "app's renderer where it loads, Mesa's llvmpipe), auto (egl where it loads)",
     )
+    p.add_argument(
+        "--close-views",
+        type=float,
+        default=0.0,
+        help="share of views taken under an object's top (between a table's legs) or at most 0.3 m from its edge, "
+        "so it overflows the frame (default 0: the recipe before 2026-12-05)",
+    )
     p.add_argument("--no-randomize", action="store_true", help="no domain randomisation (plain renders)")
     p.add_argument(
         "--compress-images",
@@ -64,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
     if args.worlds < 0 or args.per_world < 1:
         print("ocslam: error: dataset: --worlds must be ≥ 0 and --per-world ≥ 1", file=sys.stderr)
         return 2
-    if not 0.0 <= args.val_fraction <= 1.0 or not 0.0 <= args.min_visible <= 1.0:
-        print("ocslam: error: dataset: --val-fraction and --min-visible must be in [0, 1]", file=sys.stderr)
+    if not all(0.0 <= v <= 1.0 for v in (args.val_fraction, args.min_visible, args.close_views)):
+        print("ocslam: error: dataset: --val-fraction, --min-visible and --close-views must be in [0, 1]", file=sys.stderr)
         return 2
     from app.training.dataset import ALL_FAMILIES
 
@@ -102,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         label_filter=LabelFilter(args.min_pixels, args.min_visible, args.min_box, min_in_frame_fraction=args.min_in_frame),
         randomize=not args.no_randomize,
         compress_images=args.compress_images,
+        close_views=args.close_views,
         families=families,
         command=command_line(),
         **extra,

@@ -110,6 +110,7 @@ class DatasetOptions:
     #: camera renderer (``sim.renderer``): ``tiny`` (every committed model's data), ``egl`` (the app's where it
     #: loads; its images differ in shading), ``auto``
     renderer: str = field(default_factory=lambda: os.environ.get("OCSLAM_RENDERER", "tiny"))
+    close_views: float = 0.0  # share of views from under or beside an object (``sample_viewpoint``)
     compress_images: bool = False  # PNG with OpenCV's default compression instead of stored (same pixels)
     command: str | None = None
 
@@ -252,7 +253,7 @@ def render_world(task: WorldTask, opts: DatasetOptions, progress: Callable[[int]
             attempts = 0
             while k < task.images and attempts < task.images * 6:
                 attempts += 1
-                pose = sample_viewpoint(sim, rz, rng)
+                pose = sample_viewpoint(sim, rz, rng, close_views=opts.close_views)
                 if pose is None:
                     continue
                 cam_z = base_z + float(rng.uniform(-0.05, 0.07)) if opts.randomize else None

@@ -2,7 +2,9 @@
 
 :func:`sample_viewpoint` draws a free robot pose ``Pose2`` in the world frame: looking at an object from
 a random side and distance from its footprint's edge (with a line of sight to it), along one of the
-world's routes, or anywhere free.
+world's routes, or anywhere free; with ``close_views`` > 0 that share of the draws is a *close view*: the camera
+within an object's footprint (under a table's top, between its legs: the robot drives there) or at most 0.3 m from
+its edge, looking any way from inside and towards it from outside, so the object fills or overflows the frame.
 """
 
 from __future__ import annotations
@@ -38,14 +40,32 @@ def _line_of_sight(sim, xy: tuple[float, float], oid: int) -> bool:
     return hit[0] < 0 or hit[0] in sim.object_body_ids.get(oid, ())
 
 
-def sample_viewpoint(sim, rz: Randomizer, rng: np.random.Generator, tries: int = 60):
-    """A free robot pose ``Pose2`` (looking at an object, along a route, or anywhere) or None."""
+def _close_view(o, rng: np.random.Generator) -> tuple[float, float, float]:
+    """A pose ``(x, y, yaw)`` inside ``o``'s footprint or at most 0.3 m outside its edge."""
+    a = rng.uniform(-math.pi, math.pi)
+    edge = _edge_distance(o, a)
+    d = edge * float(rng.uniform(0.0, 1.0)) if rng.random() < 0.5 else edge + float(rng.uniform(0.05, 0.3))
+    x, y = o.x + d * math.cos(a), o.y + d * math.sin(a)
+    inside = d < edge
+    yaw = rng.uniform(-math.pi, math.pi) if inside else math.atan2(o.y - y, o.x - x) + rng.uniform(-0.8, 0.8)
+    return x, y, float(yaw)
+
+
+def sample_viewpoint(sim, rz: Randomizer, rng: np.random.Generator, tries: int = 60, close_views: float = 0.0):
+    """A free robot pose ``Pose2`` (looking at an object, close to or under one, along a route, or anywhere) or
+    None. ``close_views`` is the share of draws that are close views (0 draws no extra random number, so a
+    dataset's recipe without them renders the same images as before the option)."""
     from app.ocslam.se2 import Pose2
 
     world = sim.world
     xmin, ymin, xmax, ymax = rz.bounds
     routes = [np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in world.routes.values() if len(r) >= 2]
     for _ in range(tries):
+        if close_views > 0.0 and world.objects and rng.random() < close_views:
+            x, y, yaw = _close_view(world.objects[int(rng.integers(len(world.objects)))], rng)
+            if rz.free_for_camera(float(x), float(y)):
+                return Pose2(float(x), float(y), float(yaw))
+            continue
         mode = rng.random()
         if mode < 0.7 and world.objects:
             oid = int(rng.integers(len(world.objects)))

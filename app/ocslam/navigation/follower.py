@@ -365,7 +365,7 @@ class RouteFollower:
 
     The robot follows the polyline ``[start, w_k, …, w_N-1]`` from the next unvisited waypoint ``w_k``.
     A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it (the path then
-    starts again from the robot) or its progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
+    starts again from it) or its progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
     current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
     skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
 
@@ -422,9 +422,10 @@ class RouteFollower:
         ):
             self.current += 1
         if self.current != reached:
-            # a waypoint reached leaves the path: the robot heads from where it is to the next one (where the route
-            # turns back on itself, the pursuit point a lookahead along the old path would lie at the robot)
-            self._restart(p)
+            # the path now starts at the waypoint just reached, along the route's own legs: where the route turns
+            # back on itself there, the pursuit point a lookahead along the old path would lie under the robot
+            self._k0 = self.current
+            self.follower.set_path(self.waypoints[self.current - 1 :])
         twist = self.follower.compute(T_map_base, scan, T_base_scan)
         self.current = max(self.current, min(n - 1, self._k0 + self.follower.progress_index))
         if self.follower.status == ARRIVED:

@@ -247,7 +247,7 @@ def test_backs_off_when_blocked_too_close() -> None:
 def test_an_out_and_back_route_turns_at_its_far_end_and_comes_home(wobble: float) -> None:
     """A corridor tour that goes 6 m out and back along the same line (a zoo world's kind): the robot turns at the
     far waypoint and drives home instead of spinning where the way back passes under it, never mistakes the way
-    back (which passes under it from the start) for its progress, and leaves its start at cruising speed."""
+    back (which passes under it from the start) for its progress."""
     route = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 0.0]])
     rf = RouteFollower(ROBOT, route)
     poses, cmds, statuses = run(rf, Pose2(0.0, wobble, 0.0), seconds=120.0, route=True)
@@ -256,4 +256,3 @@ def test_an_out_and_back_route_turns_at_its_far_end_and_comes_home(wobble: float
     assert xy[:, 0].max() > 6.0 - rf.waypoint_tolerance_m - 0.05  # it went out to the far end
     assert math.hypot(*xy[-1]) <= 0.1 + 1e-9  # and came home
     assert len(poses) * DT < 2 * 6.0 / ROBOT.max_linear_mps + 15.0  # with no long stop on the way
-    assert cmds[int(1.0 / DT)].linear_x >= 0.9 * min(0.22, ROBOT.max_linear_mps)  # no crawl out of its start

@@ -212,12 +212,10 @@ class PathFollower:
         q = aa + t[:, None] * d
         dist = np.linalg.norm(q - p, axis=1)
         s_all = self._cum[k0:k1] + t * np.sqrt(L2)
-        # progress is continuous: a segment further along than a lookahead and a metre from the last projection
-        # is not where the robot is, even where the path passes there again (the way back of an out-and-back route),
-        # and of the segments about as near as the nearest, the robot is on the one nearest its last progress
-        dist = np.where((s_all > self._last_s + self.lookahead_m + 1.0) & (np.arange(k1 - k0) > 0), np.inf, dist)
-        near = np.flatnonzero(dist <= dist.min() + 0.05)
-        i = int(near[np.argmin(np.abs(s_all[near] - self._last_s))])
+        # where two segments are equally near (a path that retraces itself: the way back of an out-and-back route
+        # passes under the robot on its way out), the robot is on the one nearest its last progress
+        tied = np.flatnonzero(dist <= dist.min() + 1e-6)
+        i = int(tied[np.argmin(np.abs(s_all[tied] - self._last_s))])
         k = k0 + i
         return k, float(s_all[i]), float(dist[i])
 
@@ -310,9 +308,7 @@ class PathFollower:
         # pure pursuit: curvature of the arc through the lookahead point
         kappa = 2.0 * t_base[1] / (ld * ld) if ld > 1e-9 else 0.0
         v = self.max_linear_mps
-        # slow down for the goal by the path left to it, not the straight line: a route that ends where it starts
-        # would otherwise crawl from its start
-        dist_left = max(remaining, 0.0) if not last_seg else min(d_goal, max(remaining, 0.0))
+        dist_left = min(d_goal, remaining + d_goal)
         v = min(v, max(self.min_linear_mps, self.max_linear_mps * dist_left / self.slowdown_distance_m))
         if math.isfinite(along):
             room = (along - self.stop_distance_m) / self.obstacle_slowdown_m
@@ -364,8 +360,9 @@ class RouteFollower:
     """Visit ``(N, 2)`` waypoints (``map`` frame) in order with a :class:`PathFollower`.
 
     The robot follows the polyline ``[start, w_k, …, w_N-1]`` from the next unvisited waypoint ``w_k``.
-    A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it (the path then
-    starts again from it) or its progress along the polyline passes it. If the follower stays blocked for ``blocked_timeout_s`` the
+    A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it or its
+    progress along the polyline passes it. After ``stall_timeout_s`` of following without progress the path
+    starts again from the robot (:meth:`_recover_from_stall`). If the follower stays blocked for ``blocked_timeout_s`` the
     current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
     skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
 
@@ -380,6 +377,7 @@ class RouteFollower:
         *,
         waypoint_tolerance_m: float = 0.25,
         blocked_timeout_s: float = 10.0,
+        stall_timeout_s: float = 6.0,
         **follower_kwargs: float,
     ) -> None:
         self.waypoints = _as_path(waypoints_xy)
@@ -387,12 +385,30 @@ class RouteFollower:
         self.follower = PathFollower(robot, **follower_kwargs)
         self.waypoint_tolerance_m = float(waypoint_tolerance_m)
         self.blocked_timeout_s = float(blocked_timeout_s)
+        self.stall_timeout_s = float(stall_timeout_s)
+        self.stalls = 0  # restarts after following without progress (:meth:`_recover_from_stall`)
+        self._progress_mark: tuple[int, float] | None = None
+        self._progress_since = 0.0
         self.current = 0
         self.skipped: list[int] = []
         self.done = False
         self.status = IDLE
         self._k0 = 0
         self._blocked_since: float | None = None
+
+    def _recover_from_stall(self, p: NDArray[np.float64], now: float) -> None:
+        """Restart the path from the robot after ``stall_timeout_s`` of following without progress (neither a new
+        waypoint nor 5 cm along the path): where a route turns back on itself along the same line (out and back
+        along a corridor), the pursuit point a lookahead along the path lies on the way back, under the robot,
+        which spins there."""
+        mark = (self.current, self.follower._last_s)
+        last = self._progress_mark
+        if last is None or mark[0] != last[0] or abs(mark[1] - last[1]) > 0.05 or self.follower.status != FOLLOWING:
+            self._progress_mark, self._progress_since = mark, now
+        elif now - self._progress_since >= self.stall_timeout_s:
+            self.stalls += 1
+            self._restart(p)
+            self._progress_mark, self._progress_since = None, now
 
     def _restart(self, p: NDArray[np.float64]) -> None:
         self._k0 = self.current
@@ -415,17 +431,12 @@ class RouteFollower:
         if self.follower.path is None:
             self._restart(p)
         n = len(self.waypoints)
-        reached = self.current
         while (
             self.current < n - 1
             and np.linalg.norm(self.waypoints[self.current] - p) <= self.waypoint_tolerance_m
         ):
             self.current += 1
-        if self.current != reached:
-            # the path now starts at the waypoint just reached, along the route's own legs: where the route turns
-            # back on itself there, the pursuit point a lookahead along the old path would lie under the robot
-            self._k0 = self.current
-            self.follower.set_path(self.waypoints[self.current - 1 :])
+        self._recover_from_stall(p, now)
         twist = self.follower.compute(T_map_base, scan, T_base_scan)
         self.current = max(self.current, min(n - 1, self._k0 + self.follower.progress_index))
         if self.follower.status == ARRIVED:

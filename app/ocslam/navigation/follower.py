@@ -407,7 +407,11 @@ class RouteFollower:
             self._progress_mark, self._progress_since = mark, now
         elif now - self._progress_since >= self.stall_timeout_s:
             self.stalls += 1
-            self._restart(p)
+            if self.current > 0:  # along the route's own legs from the last waypoint visited
+                self._k0 = self.current
+                self.follower.set_path(self.waypoints[self.current - 1 :])
+            else:
+                self._restart(p)
             self._progress_mark, self._progress_since = None, now
 
     def _restart(self, p: NDArray[np.float64]) -> None:

@@ -256,3 +256,29 @@ def test_an_out_and_back_route_turns_at_its_far_end_and_comes_home(wobble: float
     assert xy[:, 0].max() > 6.0 - rf.waypoint_tolerance_m - 0.05  # it went out to the far end
     assert math.hypot(*xy[-1]) <= 0.1 + 1e-9  # and came home
     assert len(poses) * DT < 2 * 6.0 / ROBOT.max_linear_mps + 15.0  # with no long stop on the way
+
+
+def test_a_route_that_makes_no_progress_restarts_at_its_last_waypoint() -> None:
+    """A robot that turns on the spot without getting anywhere (the pose given again and again, as in the simulator
+    at an out-and-back route's far end) has its path restarted, once per ``stall_timeout_s``, at the last waypoint
+    it visited; a robot that moves is left alone."""
+    route = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 0.0]])
+    rf = RouteFollower(ROBOT, route, stall_timeout_s=6.0)
+    t = 0.0
+    for x in np.arange(0.0, 5.85, 0.011):  # out along the corridor at 0.22 m/s
+        rf.compute(Pose2(float(x), 0.0, 0.0), None, None, now=t)
+        t += DT
+    pose = Pose2(5.85, 0.0, 0.0)  # within the tolerance of the far waypoint, the way back under the robot
+    t0 = t
+    while t < t0 + 5.9:
+        rf.compute(pose, None, None, now=t)
+        t += DT
+    assert rf.stalls == 0 and rf.current == 2
+    while t < t0 + 6.5:
+        rf.compute(pose, None, None, now=t)
+        t += DT
+    assert rf.stalls == 1
+    np.testing.assert_allclose(rf.follower.path, route[1:])  # from the far waypoint, along the way back
+    moving = RouteFollower(ROBOT, route, stall_timeout_s=6.0)
+    poses, _, _ = run(moving, Pose2(0.0, 0.0, 0.0), seconds=20.0, route=True)
+    assert moving.stalls == 0

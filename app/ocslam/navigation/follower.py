@@ -362,7 +362,8 @@ class RouteFollower:
     The robot follows the polyline ``[start, w_k, …, w_N-1]`` from the next unvisited waypoint ``w_k``.
     A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it or its
     progress along the polyline passes it. After ``stall_timeout_s`` of following without progress the path
-    starts again from the robot (:meth:`_recover_from_stall`). If the follower stays blocked for ``blocked_timeout_s`` the
+    starts again at the last waypoint visited (:meth:`_recover_from_stall`). If the follower stays blocked for
+    ``blocked_timeout_s`` the
     current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
     skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
 
@@ -397,17 +398,17 @@ class RouteFollower:
         self._blocked_since: float | None = None
 
     def _recover_from_stall(self, p: NDArray[np.float64], now: float) -> None:
-        """Restart the path from the robot after ``stall_timeout_s`` of following without progress (neither a new
-        waypoint nor 5 cm along the path): where a route turns back on itself along the same line (out and back
-        along a corridor), the pursuit point a lookahead along the path lies on the way back, under the robot,
-        which spins there."""
-        mark = (self.current, self.follower._last_s)
+        """Restart the path at the last waypoint visited, along the route's own legs (from the robot before the
+        first), after ``stall_timeout_s`` of following without progress (neither a new waypoint nor 5 cm along the
+        path): where a route turns back on itself along the same line (out and back along a corridor), the pursuit
+        point a lookahead along the path lies on the way back, under the robot, which spins there."""
+        mark = (self.current, -self.follower.remaining_m)
         last = self._progress_mark
         if last is None or mark[0] != last[0] or abs(mark[1] - last[1]) > 0.05 or self.follower.status != FOLLOWING:
             self._progress_mark, self._progress_since = mark, now
         elif now - self._progress_since >= self.stall_timeout_s:
             self.stalls += 1
-            if self.current > 0:  # along the route's own legs from the last waypoint visited
+            if self.current > 0:
                 self._k0 = self.current
                 self.follower.set_path(self.waypoints[self.current - 1 :])
             else:

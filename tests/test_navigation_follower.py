@@ -245,9 +245,9 @@ def test_backs_off_when_blocked_too_close() -> None:
 
 @pytest.mark.parametrize("wobble", [0.0, 1e-9, -1e-9])
 def test_an_out_and_back_route_turns_at_its_far_end_and_comes_home(wobble: float) -> None:
-    """A corridor tour that goes 6 m out and back along the same line (a zoo world's kind): the robot turns at the
-    far waypoint and drives home instead of spinning where the way back passes under it, never mistakes the way
-    back (which passes under it from the start) for its progress."""
+    """A corridor tour that goes 6 m out and back along the same line (a zoo world's kind): the way back passes under
+    the robot all the way out, as near as the way out (an exact tie, or a nanometre either side); the robot never
+    takes it for its progress, goes to the far end and comes home."""
     route = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 0.0]])
     rf = RouteFollower(ROBOT, route)
     poses, cmds, statuses = run(rf, Pose2(0.0, wobble, 0.0), seconds=120.0, route=True)

@@ -19,7 +19,7 @@ from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint_estimate import estimate_footprint
-from app.ocslam.ray_centre import ray_centre
+from app.ocslam.ray_centre import ray_centre, ray_normal_equations
 
 
 def _rays_at(ev: ObjectEvidence, target: np.ndarray, origins: np.ndarray, app: float, jitter: float = 0.0) -> None:
@@ -72,6 +72,26 @@ def test_rays_of_two_objects_do_not_decide():
     _rays_at(ev, b, _arc_origins(b, 2.0, -1.2, -0.4, 6), 0.45)
     rc = ray_centre(ev)
     assert rc is not None and rc[1] > ConsciousnessConfig().ray_centre_sigma_m
+
+
+def test_lines_that_cross_behind_the_cameras_do_not_place_a_centre():
+    """A track that took two tables' boxes while the robot drove a straight stretch: the bisectors' lines from one
+    short stretch at two objects ahead cross near the path, behind some of the cameras; a bisector is a half-line,
+    so they place nothing. The same rays at one object still cross ahead of every camera."""
+    origins = np.stack([np.linspace(0.0, 0.8, 8), np.zeros(8)], axis=1)
+    two = ObjectEvidence()
+    for k, o in enumerate(origins):
+        target = np.array([2.6, 0.9]) if k % 2 else np.array([4.0, -0.1])
+        two.add_ray(o, target - o, 1.0, apparent_width=1.0)
+    _n, _off, H, g = ray_normal_equations(two, two.ray_weight > 0)
+    x = np.linalg.solve(H, g)
+    ahead = (x[None, :] - origins) @ np.array([1.0, 0.0])
+    assert ahead.min() < 0.1  # the lines do cross behind a camera: the case is not vacuous
+    assert ray_centre(two) is None
+    one = ObjectEvidence()
+    _rays_at(one, np.array([2.6, 0.9]), _arc_origins(np.array([2.6, 0.9]), 2.0, -2.8, -2.2, 8), 1.0)
+    got = ray_centre(one)
+    assert got is not None and np.allclose(got[0], [2.6, 0.9], atol=1e-6)
 
 
 def _table_with_stool(sigma: float):

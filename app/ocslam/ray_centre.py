@@ -19,6 +19,9 @@ from app.ocslam.evidence import ObjectEvidence
 
 FloatArray = NDArray[np.float64]
 
+#: how far ahead of every camera that saw it a crossing of the bisectors must lie (m)
+_MIN_AHEAD_M = 0.1
+
 
 def solve2(H: FloatArray, g: FloatArray) -> FloatArray:
     """``H⁻¹ g`` for a 2×2 ``H``: LU with partial pivoting in Python floats (numpy's ``linalg.solve``
@@ -60,7 +63,8 @@ def ray_centre(ev: ObjectEvidence) -> tuple[FloatArray, float] | None:
     """``(centre (2,), σ (m))``: where the object's weighted bisector rays cross (least squares, object
     frame) and how well they fix it: the rays' 90th-percentile residual over the square root of the
     smallest eigenvalue of their information matrix (rays from one direction fix nothing along it).
-    ``None`` with fewer than four rays or parallel ones."""
+    ``None`` with fewer than four rays, parallel ones, or a crossing less than ``_MIN_AHEAD_M`` ahead of a camera
+    (the lines cross behind it: the rays do not meet)."""
     use = ev.ray_weight > 1e-6
     if int(np.count_nonzero(use)) < 4:
         return None
@@ -72,6 +76,11 @@ def ray_centre(ev: ObjectEvidence) -> tuple[FloatArray, float] | None:
     try:
         x = solve2(H, g)
     except np.linalg.LinAlgError:
+        return None
+    # a bisector is a half-line from the camera: a crossing behind a camera (lines from one stretch of path that
+    # saw two objects cross near the path) places nothing
+    o, d = ev.ray_origin[use], ev.ray_dir[use]
+    if float(np.min((x[0] - o[:, 0]) * d[:, 0] + (x[1] - o[:, 1]) * d[:, 1])) < _MIN_AHEAD_M:
         return None
     res = np.sort(np.abs(n @ x - off))
     scale = max(float(res[int(0.9 * (len(res) - 1))]), 0.02)  # the 90th percentile: rays of two objects disagree

@@ -146,10 +146,10 @@ def test_small_dataset_is_split_by_world_and_consistent(tmp_path: Path) -> None:
 
 
 def test_overlay_mesh_file_known_answer(tmp_path: Path) -> None:
-    from app.training.randomization import write_quad_obj
+    from app.training.randomization import quad_obj_geometry, write_mesh_obj
 
     quads = [(np.zeros(3), np.array([2.0, 0, 0]), np.array([0, 1.0, 0]), 0.5)]
-    obj = write_quad_obj(quads, tmp_path / "q.obj", material="q.mtl")
+    obj = write_mesh_obj(quad_obj_geometry(quads), tmp_path / "q.obj", material="q.mtl")
     lines = obj.read_text().splitlines()
     assert "mtllib q.mtl" in lines and "usemtl m" in lines
     v = [[float(x) for x in ln.split()[1:]] for ln in lines if ln.startswith("v ")]

@@ -234,10 +234,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"checkpoint: {opts.checkpoint} (assets/models/detector-train.pt holds another run; continue this one with "
               f"--resume --checkpoint {opts.checkpoint})")
     opts.session_epochs = args.session_epochs
-    from app.config import PROJECT_ROOT as _ROOT
-
     # The trained float model goes beside the app's int8 one, which is made from it afterwards.
-    opts.out_model = args.out if args.out is not None else _ROOT / "assets" / "models" / "detector-float.onnx"
+    opts.out_model = args.out if args.out is not None else PROJECT_ROOT / "assets" / "models" / "detector-float.onnx"
     if args.data.is_dir() and not (args.data / "data.yaml").exists() and any(args.data.iterdir()):
         print(f"ocslam train-detector: {args.data} exists but has no data.yaml", file=sys.stderr)
         return 2

@@ -108,11 +108,6 @@ def write_mesh_obj(geometry: str, path: Path, material: str | None = None) -> Pa
     return path
 
 
-def write_quad_obj(quads: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]], path: Path, material: str | None = None) -> Path:
-    """Write planar quads (:func:`quad_obj_geometry`) as a Wavefront OBJ mesh file (:func:`write_mesh_obj`)."""
-    return write_mesh_obj(quad_obj_geometry(quads), path, material)
-
-
 @functools.lru_cache(maxsize=4)
 def _distractor_urdfs(data_path: str) -> tuple[Path, ...]:
     """pybullet_data's ``random_urdfs`` (listed once a process: a directory walk of 1,000 files)."""

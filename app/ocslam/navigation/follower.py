@@ -408,16 +408,17 @@ class RouteFollower:
             self._progress_mark, self._progress_since = mark, now
         elif now - self._progress_since >= self.stall_timeout_s:
             self.stalls += 1
-            if self.current > 0:
-                self._k0 = self.current
-                self.follower.set_path(self.waypoints[self.current - 1 :])
-            else:
-                self._restart(p)
+            self._restart(p, from_last_visited=True)
             self._progress_mark, self._progress_since = None, now
 
-    def _restart(self, p: NDArray[np.float64]) -> None:
+    def _restart(self, p: NDArray[np.float64], from_last_visited: bool = False) -> None:
+        """Follow the waypoints left from the robot at ``p``, or (``from_last_visited``, once one was) from the last
+        waypoint visited, along the route's own legs."""
         self._k0 = self.current
-        self.follower.set_path(np.vstack([p[None], self.waypoints[self.current :]]))
+        if from_last_visited and self.current > 0:
+            self.follower.set_path(self.waypoints[self.current - 1 :])
+        else:
+            self.follower.set_path(np.vstack([p[None], self.waypoints[self.current :]]))
 
     def compute(
         self,

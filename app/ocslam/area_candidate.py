@@ -213,6 +213,7 @@ def area_candidate(
         return (
             Candidate(
                 area_index=k,
+            box_cols=(float(area.box_px[0]), float(area.box_px[2])),
                 label=area.label,
                 confidence=area.confidence,
                 source="lidar_legs" if len(group) > 1 else "lidar_island",
@@ -248,6 +249,7 @@ def area_candidate(
     return (
         Candidate(
             area_index=k,
+            box_cols=(float(area.box_px[0]), float(area.box_px[2])),
             label=area.label,
             confidence=area.confidence,
             source="ground_plane",

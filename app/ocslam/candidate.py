@@ -43,6 +43,8 @@ class Candidate:
     #: a box cut by one border only: ``(2, 2)`` ``[origin, outward normal]`` (object frame) of its other,
     #: *closed* edge's half-line: the object does not extend beyond it (:meth:`beyond_closed_edge`)
     closed_edge: FloatArray | None = None
+    #: the box's image columns ``(x1, x2)`` (camera pixels): two boxes side by side in one frame saw two things
+    box_cols: tuple[float, float] | None = None
     track_id: int | None = None
     status: str = "new"  # new | created | updated | collision
 

@@ -28,6 +28,7 @@ from app.ocslam.tracks import (
     fits_instance,
     merge_tracks,
     overlap_fraction,
+    seen_apart,
 )
 
 FloatArray = NDArray[np.float64]
@@ -116,6 +117,28 @@ def strip_points(t: Track, other: FloatArray, cfg: ConsciousnessConfig, known_fr
         return False
     t.refresh(known_free)
     return t.footprint is not None
+
+
+def split_shared(a: Track, b: Track, cfg: ConsciousnessConfig, known_free: FreeFn | None) -> list[Track]:
+    """Two objects on some of the same LIDAR points: each voxel within half the island gap of the other's
+    stays with the one that saw it in more frames (both keep it on a tie); returns those left with no
+    point of their own (their footprints are re-estimated otherwise)."""
+    ea, eb = a.evidence, b.evidence
+    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    da, ia = cKDTree(eb.points).query(ea.points, k=1)
+    db, ib = cKDTree(ea.points).query(eb.points, k=1)
+    a_loses = (da <= gap) & (ea.hits < eb.hits[ia])
+    b_loses = (db <= gap) & (eb.hits < ea.hits[ib])
+    lost = []
+    for t, loses in ((a, a_loses), (b, b_loses)):
+        if not loses.any():
+            continue
+        t.evidence.keep_points(~loses)
+        if not t.evidence.has_points:
+            lost.append(t)
+            continue
+        t.refresh(known_free)
+    return lost
 
 
 def shares_evidence(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> bool:
@@ -254,6 +277,16 @@ def resolve_track_collisions(
                         continue
                     shared = _sharing(a, b, cfg)
                     if shared is None:
+                        continue
+                    if seen_apart(a, b, int(cfg.seen_apart_frames)):
+                        # side by side through separate boxes, frame after frame: two objects whose points mix
+                        # (a round table's and the stools between it and the next); each keeps what it saw more
+                        lost = [t for t in split_shared(a, b, cfg, known_free) if t.id not in removed]
+                        for t in lost:
+                            removed.add(t.id)
+                            rep.removed += 1
+                        if a in lost:
+                            break
                         continue
                     if not one_instance(a, b, cfg.fragment_fits_largest):
                         # together larger than one instance: the larger loses the shared points (as a

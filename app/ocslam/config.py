@@ -464,3 +464,17 @@ class ConsciousnessConfig:
         help="improved: objects of different classes collide when this share of the smaller one's points lies on the other's",
         live=True,
     )
+    seen_apart_frames: int = param(
+        3, min=0, max=50, step=1,
+        help="improved: two objects of one class seen side by side through boxes that do not overlap in the image in at "
+        "least this many frames (and never through overlapping ones) are two objects however their points mix: each "
+        "shared LIDAR point stays with the one that saw it more often (two round tables seen along one line; 0: off)",
+        live=True,
+    )
+    pedestal_fraction: float = param(
+        0.8, min=0.0, max=1.0, step=0.05,
+        help="improved: a legged object seen as one small island on its box's centre line in at least this share of its "
+        "views stands on a pedestal: of a later group of legs only those at that support are its own (stools round a "
+        "round table; 0: off)",
+        live=True,
+    )

@@ -60,6 +60,7 @@ class Track:
     misses: int = 0  # frames in clear view (in range, not occluded) without a box of its class
     miss_stamps: set[float] = field(default_factory=set)  # the stamps of those frames (recent ones)
     boxes: dict[float, int] = field(default_factory=dict)  # recent frames (stamp → box index) it was seen in
+    box_cols: dict[float, tuple[float, float]] = field(default_factory=dict)  # their boxes' columns (x1, x2), px
     conf_sum: float = 0.0  # confidences of the frames that counted (presence_confidence = mean / best)
     conf_n: int = 0
     conf_best: float = 0.0
@@ -77,11 +78,15 @@ class Track:
             return self.conf_best
         return float(c)
 
-    def saw(self, stamp: float, box: int, keep: int = RECENT_FRAMES) -> None:
+    def saw(self, stamp: float, box: int, cols: tuple[float, float] | None = None, keep: int = RECENT_FRAMES) -> None:
+        """Seen at ``stamp`` through the frame's box ``box`` (its image columns ``cols``, if known)."""
         self.boxes[stamp] = box
+        if cols is not None:
+            self.box_cols[stamp] = cols
         if len(self.boxes) > keep:
             for k in sorted(self.boxes)[: len(self.boxes) - keep]:
                 del self.boxes[k]
+                self.box_cols.pop(k, None)
 
     def missed(self, stamp: float, keep: int = RECENT_FRAMES) -> None:
         """A clear miss at ``stamp`` (its stamp remembered as long as :meth:`saw` remembers boxes)."""
@@ -122,6 +127,7 @@ class Sighting:
     r_hi: float
     weight: float  # bisector ray weight (0: box cut by the image border)
     apparent_width: float = float("nan")
+    box_cols: tuple[float, float] | None = None  # the box's image columns (x1, x2), camera pixels
 
     def holds(self, center: FloatArray, margin: float = 0.02) -> bool:
         v = np.asarray(center, dtype=np.float64) - self.apex
@@ -213,6 +219,39 @@ def co_observed(a: Track, b: Track) -> bool:
     return any(a.boxes[k] != b.boxes[k] for k in common)
 
 
+def pedestal(ev: ObjectEvidence, own: FloatArray, pc: ClassPrior, fraction: float) -> bool:
+    """True if a legged object was seen as one small island on its box's centre line in at least ``fraction``
+    of its views (and more often than as legs off it), and its points ``own`` ``(N, 2)`` are still that one
+    support: a pedestal (a round table's). A four-legged table shows one central leg only from some
+    directions; a pedestal stays central from all of them."""
+    if fraction <= 0.0 or not pc.legged or ev.support_obs <= ev.corner_obs or len(own) == 0:
+        return False
+    if ev.support_obs < fraction * ev.observations:
+        return False
+    _th, lo, hi = min_area_rect(own)
+    return float(np.max(hi - lo)) <= pc.leg_size_max * 1.5
+
+
+def seen_apart(a: Track, b: Track, min_frames: int) -> bool:
+    """True if two objects were seen side by side in at least ``min_frames`` frames and in every frame that
+    boxed both through different boxes of known columns: boxes that do not overlap in the image hold
+    different bearings, so two objects however their points mix (one box's island is never the other's
+    object in every frame). ``min_frames`` 0: never."""
+    if min_frames <= 0:
+        return False
+    apart = 0
+    for k in a.boxes.keys() & b.boxes.keys():
+        if a.boxes[k] == b.boxes[k]:
+            continue
+        ca, cb = a.box_cols.get(k), b.box_cols.get(k)
+        if ca is None or cb is None:
+            continue
+        if min(ca[1], cb[1]) > max(ca[0], cb[0]):
+            return False  # overlapping boxes in one frame: a double box of one object is possible
+        apart += 1
+    return apart >= min_frames
+
+
 # -- evidence in, objects out ---------------------------------------------------------------------------
 
 
@@ -263,7 +302,7 @@ def credit_track(
         t.last_frame_stamp = stamp
     t.evidence.add_ray(sight.apex, sight.direction, sight.weight, sight.kf, decay=float(cfg.rolling_average_weight))
     t.touched_stamp = stamp
-    t.saw(stamp, box)
+    t.saw(stamp, box, sight.box_cols)
     t.detections += 1
     t.last_seen = max(t.last_seen, stamp)
     t.refresh(known_free)
@@ -307,7 +346,7 @@ def create_track(
         last_frame_stamp=stamp,
         touched_stamp=stamp,
     )
-    t.saw(stamp, cand.area_index)
+    t.saw(stamp, cand.area_index, cand.box_cols)
     t.frame_confidence(cand.confidence, cfg)
     t.complete_views = int(cand.ray_weight > 0.0)
     t.refresh(known_free)
@@ -335,6 +374,16 @@ def update_track(
             # the union would not fit one object of this class: keep the track's shape, use the ray only
             cand = dataclasses.replace(cand, points=np.zeros((0, 2)), ground_center=None)
             consistent = False
+        elif cfg.point_ownership and cand.legs and cand.support is False and pedestal(t.evidence, own, pc, float(cfg.pedestal_fraction)):
+            # a pedestal stays one: of a group of legs, only those at its support are its own (the legs of
+            # stools round a round table); a group with none there says it is no pedestal after all
+            at = nearest_distances(cand.points, own) <= pc.leg_size_max
+            if at.any():
+                cand = dataclasses.replace(cand, points=cand.points[at], support=True)
+            else:
+                t.evidence.corner_obs += 1
+                cand = dataclasses.replace(cand, points=np.zeros((0, 2)), ground_center=None)
+                consistent = False
     add_evidence(t.evidence, cand, kf, cfg)
     if cand.source == "lidar_legs" or (cand.source == "lidar_island" and t.source == "ground_plane"):
         t.source = cand.source
@@ -342,7 +391,7 @@ def update_track(
         t.presence, t.frames = _soft_decision(t, cand.confidence, cfg)
         t.last_frame_stamp = stamp
     t.touched_stamp = stamp
-    t.saw(stamp, cand.area_index)
+    t.saw(stamp, cand.area_index, cand.box_cols)
     t.confidence = cand.confidence
     t.detections += 1
     t.complete_views += int(cand.ray_weight > 0.0)
@@ -369,6 +418,8 @@ def merge_tracks(keep: Track, drop: Track, cfg: ConsciousnessConfig, known_free:
     keep.miss_stamps = (keep.miss_stamps | drop.miss_stamps) - seen_k - seen_d
     for k, v in drop.boxes.items():
         keep.boxes.setdefault(k, v)
+    for k, c in drop.box_cols.items():
+        keep.box_cols.setdefault(k, c)
     keep.last_seen = max(keep.last_seen, drop.last_seen)
     keep.last_frame_stamp = max(keep.last_frame_stamp, drop.last_frame_stamp)
     keep.created = min(keep.created, drop.created)

@@ -91,3 +91,40 @@ def test_two_tables_boxed_side_by_side_frame_after_frame_stay_two(overlap: bool)
     assert near_stool(pts[0]) and not near_stool(pts[1])  # the stool stays with the table that saw it more often
     assert len(_collide([_table_track(0, np.vstack([ped_a, stool]), 6, cols_a),
                          _table_track(1, np.vstack([ped_b, stool]), 3, cols_b)], seen_apart_frames=0)) == 1
+
+
+@pytest.mark.parametrize("fraction", [0.8, 0.0])
+def test_a_pedestal_joins_no_points_beside_it(fraction: float):
+    """A round table seen as its pedestal alone in every view is one support: with ``pedestal_fraction`` the
+    legs of a stool beside it do not make one table with it — neither another track on them nor another box's
+    island of the same frame (the box that saw the pedestal on its centre line saw all of the table the LIDAR
+    can). Without the rule both unions pass as one (dining-table-sized) instance."""
+    from shapely.geometry import Polygon
+
+    from app.ocslam.candidate import Candidate, FrameReport
+    from app.ocslam.collisions import one_instance, resolve_frame_collisions
+    from app.ocslam.config import ConsciousnessConfig
+    from app.ocslam.footprint import Footprint
+    from app.ocslam.se2 import Pose2
+
+    ped, stool = _square(3.4, 0.9), np.vstack([_square(3.95 + 0.26 * i, 0.77 + 0.26 * j) for i in range(2) for j in range(2)])
+    table = _table_track(0, ped, 4, {})
+    table.evidence.support_obs, table.evidence.corner_obs, table.evidence.observations = 4, 0, 4
+    other = _table_track(1, stool, 4, {})
+    assert one_instance(table, other, False, fraction) == (fraction == 0.0)
+
+    cfg = ConsciousnessConfig()
+    cfg.pedestal_fraction = fraction
+
+    def cand(k: int, pts: np.ndarray, support: bool) -> Candidate:
+        c = pts.mean(axis=0)
+        return Candidate(k, "table", 0.9, "lidar_island" if support else "lidar_legs", pts, Footprint(c, 0.0, 1.0, 1.0),
+                         3.0, support=support, legs=True)
+
+    stool_box, pedestal_box = cand(0, stool, False), cand(1, ped, True)
+    resolve_frame_collisions([stool_box, pedestal_box], cfg, FrameReport(3.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon()))
+    kept = stool_box if stool_box.status != "collision" else pedestal_box
+    assert (pedestal_box.status == "collision") != (stool_box.status == "collision")
+    assert len(kept.points) == (len(ped) if fraction > 0.0 else len(ped) + len(stool))
+    if fraction > 0.0:
+        assert kept.support is True and np.allclose(kept.points, ped)

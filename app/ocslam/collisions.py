@@ -28,6 +28,7 @@ from app.ocslam.tracks import (
     fits_instance,
     merge_tracks,
     overlap_fraction,
+    pedestal,
     seen_apart,
 )
 
@@ -61,9 +62,10 @@ def strong_points(t: Track) -> FloatArray:
     return ev.points[ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))]
 
 
-def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False) -> bool:
+def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False, pedestal_fraction: float = 0.0) -> bool:
     """True if two same-class objects' well-seen points together fit one instance of the class (one
-    of its typical shapes; for legs seen as legs, the legs of one instance). With ``fragment_fits_largest``,
+    of its typical shapes; for legs seen as legs, the legs of one instance; for an object on a pedestal
+    (:func:`~app.ocslam.tracks.pedestal` at ``pedestal_fraction``), that one support). With ``fragment_fits_largest``,
     when either was only seen through border-cut boxes (a fragment), its largest instance is enough (the
     other's points may overstate its shape). Without points on either side only their footprints can
     tell: True."""
@@ -75,6 +77,10 @@ def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False) -> boo
     pc = a.prior
     if not fits_instance(pc, float(d[0]), float(d[1]), typical=not (fragment_fits_largest and (a.partial_only or b.partial_only))):
         return False
+    if pc.legged and float(max(d)) > pc.leg_size_max * 1.5 and any(
+        pedestal(t.evidence, p, pc, pedestal_fraction) for t, p in ((a, pa), (b, pb))
+    ):
+        return False  # a pedestal's points are its support alone: the rest is another object's
     legs = pc.legged and all(t.evidence.leg_obs * 2 > t.evidence.observations for t in (a, b))
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
 
@@ -173,8 +179,14 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
             frac = overlap_fraction(fa, fb)
             if a.label == b.label:
                 if d < thr or frac >= ov:
-                    # one object seen through two boxes: a absorbs b
-                    a.points = np.vstack([a.points, b.points])
+                    # one object seen through two boxes: a absorbs b; a box that saw one small island on its
+                    # centre line (a pedestal) saw all of the object the LIDAR can: the other box's island is
+                    # something beside it (a stool)
+                    if float(cfg.pedestal_fraction) > 0.0 and (a.support is True or b.support is True):
+                        if a.support is not True:
+                            a.points, a.support, a.legs, a.source = b.points, True, b.legs, b.source
+                    else:
+                        a.points = np.vstack([a.points, b.points])
                     a.confidence = max(a.confidence, b.confidence)
                     if len(a.points):
                         ev = ObjectEvidence()
@@ -288,7 +300,7 @@ def resolve_track_collisions(
                         if a in lost:
                             break
                         continue
-                    if not one_instance(a, b, cfg.fragment_fits_largest):
+                    if not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction)):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own
                         loser, other_pts = (a, shared[1]) if fa.area >= fb.area else (b, shared[0])
@@ -302,7 +314,7 @@ def resolve_track_collisions(
                         break
                     continue
                 same = d < thr or overlap_fraction(fa, fb) >= ov
-                if same and cfg.point_ownership and not one_instance(a, b, cfg.fragment_fits_largest):
+                if same and cfg.point_ownership and not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction)):
                     # overlapping, but together larger than any instance: two objects, unless each stands
                     # on the other's centre (two solid objects cannot interpenetrate: one of them holds
                     # foreign points)

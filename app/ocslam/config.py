@@ -474,7 +474,8 @@ class ConsciousnessConfig:
     pedestal_fraction: float = param(
         0.8, min=0.0, max=1.0, step=0.05,
         help="improved: a legged object seen as one small island on its box's centre line in at least this share of its "
-        "views stands on a pedestal: of a later group of legs only those at that support are its own (stools round a "
-        "round table; 0: off)",
+        "views stands on a pedestal, and its LIDAR cross-section is that support alone: of a later group of legs only "
+        "those at it are its own, and neither another box's island in the same frame nor another object's points join "
+        "it (stools round a round table; 0: off)",
         live=True,
     )

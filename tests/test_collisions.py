@@ -128,3 +128,20 @@ def test_a_pedestal_joins_no_points_beside_it(fraction: float):
     assert len(kept.points) == (len(ped) if fraction > 0.0 else len(ped) + len(stool))
     if fraction > 0.0:
         assert kept.support is True and np.allclose(kept.points, ped)
+
+
+def test_only_classes_with_pedestal_instances_stand_on_a_pedestal():
+    """``ClassPrior.pedestal``: a table may stand on one central column; a chair seen as one central leg in
+    every view is a chair whose other legs were hidden, not a pedestal chair (``tracks.pedestal``)."""
+    from app.ocslam.classes import prior
+    from app.ocslam.evidence import ObjectEvidence
+    from app.ocslam.tracks import pedestal
+
+    ev = ObjectEvidence()
+    ev.support_obs, ev.corner_obs, ev.observations = 5, 0, 5
+    support = _square(1.0, 1.0)
+    assert prior("table").pedestal and pedestal(ev, support, prior("table"), 0.8)
+    assert not pedestal(ev, support, prior("table"), 0.0)
+    assert not prior("chair").pedestal and not pedestal(ev, support, prior("chair"), 0.8)
+    ev.support_obs, ev.observations = 3, 5  # central in 60 % of the views: a four-legged table seen diagonally
+    assert not pedestal(ev, support, prior("table"), 0.8)

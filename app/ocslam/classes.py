@@ -18,6 +18,8 @@ chair); ``leg_span``: the largest ``(long, short)`` extent of the legs of one in
 ``solid_fraction``: the central fraction of the box's width in which the object blocks the LIDAR
 beams (a door blocks all of it, a potted plant only its pot): used by the see-through check.
 ``on_wall``: the object sits in a wall (doors), so its island legitimately continues into the wall.
+``pedestal``: some instances stand on one central support much smaller than the object (a round table's
+column), so a lone small island on the box's centre line may be all the LIDAR ever sees of it.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ class ClassPrior:
     legged: bool = False
     solid_fraction: float = 0.0
     on_wall: bool = False
+    pedestal: bool = False
     #: Largest horizontal extent of one leg island (m); islands larger than this are never legs.
     leg_size_max: float = 0.35
     shapes: tuple[tuple[float, float], ...] = ()
@@ -123,6 +126,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior(
             "table", (0.7, 1.8, 2.3), (0.45, 1.0, 1.35), (0.45, 0.74, 1.0),
             legged=True, leg_size_max=0.25, shapes=((1.8, 1.0), (1.0, 1.0)), leg_span=(2.3, 1.35), max_island=0.45,
+            pedestal=True,
         ),
         ClassPrior(
             "chair", (0.35, 1.1, 2.7), (0.3, 1.0, 1.3), (0.45, 0.8, 1.3), solid_fraction=0.4,

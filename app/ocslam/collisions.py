@@ -182,7 +182,7 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                     # one object seen through two boxes: a absorbs b; a box that saw one small island on its
                     # centre line (a pedestal) saw all of the object the LIDAR can: the other box's island is
                     # something beside it (a stool)
-                    if float(cfg.pedestal_fraction) > 0.0 and (a.support is True or b.support is True):
+                    if float(cfg.pedestal_fraction) > 0.0 and prior(a.label).pedestal and (a.support is True or b.support is True):
                         if a.support is not True:
                             a.points, a.support, a.legs, a.source = b.points, True, b.legs, b.source
                     else:

@@ -224,7 +224,7 @@ def pedestal(ev: ObjectEvidence, own: FloatArray, pc: ClassPrior, fraction: floa
     of its views (and more often than as legs off it), and its points ``own`` ``(N, 2)`` are still that one
     support: a pedestal (a round table's). A four-legged table shows one central leg only from some
     directions; a pedestal stays central from all of them."""
-    if fraction <= 0.0 or not pc.legged or ev.support_obs <= ev.corner_obs or len(own) == 0:
+    if fraction <= 0.0 or not (pc.legged and pc.pedestal) or ev.support_obs <= ev.corner_obs or len(own) == 0:
         return False
     if ev.support_obs < fraction * ev.observations:
         return False

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from app.cli import main as cli_main
@@ -320,6 +320,7 @@ def test_wall_pieces_and_openings_tile_the_wall(length, height, cuts):
 
 @settings(max_examples=40, deadline=None)
 @given(st.integers(min_value=0, max_value=10_000), st.sampled_from(["rooms", "corridor", "lshape", "openplan"]))
+@example(4551, "lshape")  # an outer wall exactly a window plus 1.4 m long: the window's range rounded below zero
 def test_bounds_are_the_union_bounds(seed: int, family: str) -> None:
     """World.bounds (the extremes of the parts' bounds) equals the bounds of the parts' union."""
     from shapely.geometry import Polygon

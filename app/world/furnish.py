@@ -143,9 +143,10 @@ class Builder:
             k = int(self.rng.integers(n))
             L = edges[k][2]
             w = round(float(self.rng.uniform(1.0, 1.6)), 1)
-            if L < w + 1.4:
+            hi = L - 0.7 - w  # the last start that leaves 0.7 m of wall at each end
+            if L < w + 1.4 or hi < 0.7:  # an edge of exactly w + 1.4 m may round either way in each test
                 continue
-            s0 = float(self.rng.uniform(0.7, L - 0.7 - w))
+            s0 = float(self.rng.uniform(0.7, hi))
             if all(s0 + w + 0.3 < t0 or s0 > t1 + 0.3 for t0, t1 in taken[k] + wins[k]):
                 wins[k].append((s0, s0 + w))
         for k in range(n):

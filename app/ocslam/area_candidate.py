@@ -213,7 +213,7 @@ def area_candidate(
         return (
             Candidate(
                 area_index=k,
-            box_cols=(float(area.box_px[0]), float(area.box_px[2])),
+                box_cols=area.columns,
                 label=area.label,
                 confidence=area.confidence,
                 source="lidar_legs" if len(group) > 1 else "lidar_island",
@@ -249,7 +249,7 @@ def area_candidate(
     return (
         Candidate(
             area_index=k,
-            box_cols=(float(area.box_px[0]), float(area.box_px[2])),
+            box_cols=area.columns,
             label=area.label,
             confidence=area.confidence,
             source="ground_plane",

@@ -80,7 +80,7 @@ def sighting(area: BoundingArea, T_map_scan: Pose2, stamp: float, kf: int, cfg: 
     cut = area.truncated["left"] or area.truncated["right"]
     return Sighting(
         area.label, area.confidence, stamp, kf, apex, np.array([np.cos(b), np.sin(b)]), area.half_angle,
-        r_lo, r_hi, 0.0 if cut else 1.0, box_cols=(float(area.box_px[0]), float(area.box_px[2])),
+        r_lo, r_hi, 0.0 if cut else 1.0, box_cols=area.columns,
     )
 
 

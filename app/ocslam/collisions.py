@@ -85,6 +85,11 @@ def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False, pedest
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
 
 
+def shared_gap(cfg: ConsciousnessConfig) -> float:
+    """How near a point must lie to another object's to be on it (m): half the island gap, at least 3 cm."""
+    return max(0.5 * float(cfg.island_threshold_m), 0.03)
+
+
 #: Point sets up to this many pairs are compared all pairs at once, larger ones on KD-trees.
 _ALL_PAIRS_MAX = 40_000
 
@@ -96,7 +101,7 @@ def shared_fractions(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> 
     the rounding of the distance might decide) sends the whole test to the KD-trees' distances."""
     if len(a) == 0 or len(b) == 0:
         return 0.0, 0.0
-    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    gap = shared_gap(cfg)
     if len(a) * len(b) <= _ALL_PAIRS_MAX:
         dx = a[:, 0, None] - b[None, :, 0]
         dy = a[:, 1, None] - b[None, :, 1]
@@ -115,7 +120,7 @@ def strip_points(t: Track, other: FloatArray, cfg: ConsciousnessConfig, known_fr
     """Remove from ``t``'s evidence the voxels lying on ``other``'s points (they are the other object's);
     True if ``t`` keeps well-seen points of its own (its footprint is re-estimated)."""
     ev = t.evidence
-    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    gap = shared_gap(cfg)
     d, _ = cKDTree(other).query(ev.points, k=1)
     keep = d > gap
     ev.keep_points(keep)
@@ -130,7 +135,7 @@ def split_shared(a: Track, b: Track, cfg: ConsciousnessConfig, known_free: FreeF
     stays with the one that saw it in more frames (both keep it on a tie); returns those left with no
     point of their own (their footprints are re-estimated otherwise)."""
     ea, eb = a.evidence, b.evidence
-    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    gap = shared_gap(cfg)
     da, ia = cKDTree(eb.points).query(ea.points, k=1)
     db, ib = cKDTree(ea.points).query(eb.points, k=1)
     a_loses = (da <= gap) & (ea.hits < eb.hits[ia])
@@ -156,7 +161,7 @@ def shares_evidence(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> b
         return True
     small, big = (a, b) if len(a) <= len(b) else (b, a)
     d, _ = cKDTree(big).query(small, k=1)
-    gap = max(0.5 * float(cfg.island_threshold_m), 0.03)
+    gap = shared_gap(cfg)
     return float(np.mean(d <= gap)) >= float(cfg.shared_evidence_fraction)
 
 

@@ -86,6 +86,11 @@ class BoundingArea:
         return 0.5 * float(_angle_diff(self.bearing_left, self.bearing_right))
 
     @property
+    def columns(self) -> tuple[float, float]:
+        """``(x1, x2)``: the box's image columns (camera pixels, clipped)."""
+        return float(self.box_px[0]), float(self.box_px[2])
+
+    @property
     def bottom_reliable(self) -> bool:
         """The bottom edge is inside the image and below the horizon: ``near_range_m`` is a real range."""
         return not self.truncated.get("bottom", False) and np.isfinite(self.near_range_m)

@@ -363,8 +363,7 @@ class RouteFollower:
     A waypoint counts as visited when the robot comes within ``waypoint_tolerance_m`` of it or its
     progress along the polyline passes it. After ``stall_timeout_s`` of following without progress the path
     starts again at the last waypoint visited (:meth:`_recover_from_stall`). If the follower stays blocked for
-    ``blocked_timeout_s`` the
-    current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
+    ``blocked_timeout_s`` the current waypoint is skipped (recorded in ``skipped``). ``done`` once the last one is reached or
     skipped; ``status`` mirrors the follower's, with ``"done"`` at the end.
 
     With no planner behind it to keep clearance from mapped obstacles, the follower's path check uses

@@ -145,3 +145,26 @@ def test_only_classes_with_pedestal_instances_stand_on_a_pedestal():
     assert not prior("chair").pedestal and not pedestal(ev, support, prior("chair"), 0.8)
     ev.support_obs, ev.observations = 3, 5  # central in 60 % of the views: a four-legged table seen diagonally
     assert not pedestal(ev, support, prior("table"), 0.8)
+
+
+def test_what_one_view_says_of_a_single_support():
+    """``area_candidate._support``: one leg-sized island on the centre line of a much wider box says "a single support"
+    (True); several legs, an island wider than a leg or a box not much wider say "not one support" (False); one leg
+    off the centre line, or a box of unknown width, tells nothing (None): the counts of a track's views
+    (``support_obs``, ``corner_obs``) and the pedestal branch of ``update_track`` (``support is False``) read
+    these three values, so they must be Python's, not numpy's (``np.False_ is False`` is false)."""
+    from app.ocslam.area_candidate import _support
+    from app.ocslam.classes import prior
+    from app.ocslam.islands import Island
+
+    table = prior("table")
+    leg = Island(_square(3.0, 0.0, 0.03), np.arange(4))
+    wide = Island(_square(3.0, 0.0, 0.3), np.arange(4))
+    half = 0.2
+    assert _support([0], leg, 0.01, half, 1.2, table) is True
+    assert _support([0, 1], leg, 0.01, half, 1.2, table) is False
+    assert _support([0], wide, 0.01, half, 1.2, table) is False
+    assert _support([0], leg, 0.01, half, 0.15, table) is False  # the box barely wider than the island
+    assert _support([0], leg, 0.1, half, 1.2, table) is None  # off the centre line
+    assert _support([0], leg, 0.01, half, float("nan"), table) is None
+    assert _support([0], leg, np.float64(0.01), half, 1.2, table) is True

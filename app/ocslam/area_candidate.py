@@ -196,18 +196,11 @@ def area_candidate(
         ev = ObjectEvidence()
         ev.add_points(pts_map)
         ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app, open_side=open_side)  # cut box: a viewpoint only
-        support = None
+        support: bool | None = None
         legs = pc.legged and all(islands[g].physical_extent <= pc.leg_size_max for g in group)
         ev.observations, ev.leg_obs = 1, int(legs)
         if pc.legged:
-            off = area.angular_offsets(islands[best].centroid[None, :])[0]
-            support = (
-                len(group) == 1
-                and islands[best].physical_extent <= pc.leg_size_max
-                and abs(off) < 0.25 * half
-                and np.isfinite(app)
-                and app > 3.0 * max(islands[best].extent, 0.05)
-            )
+            support = _support(group, islands[best], float(area.angular_offsets(islands[best].centroid[None, :])[0]), half, app, pc)
             ev.support_obs, ev.corner_obs = (1, 0) if support else (0, 1)
         fp = estimate_footprint(ev, pc)
         return (
@@ -272,6 +265,20 @@ def _hidden_by_other_box(uv: FloatArray, other_boxes: FloatArray | None, margin_
     u, v = uv[:, 0][:, None], uv[:, 1][:, None]
     inside = (u >= b[:, 0] - margin_px) & (u <= b[:, 2] + margin_px) & (v >= b[:, 1] - margin_px) & (v <= b[:, 3] + margin_px)
     return bool(np.mean(inside.any(axis=1)) > 0.5)
+
+
+def _support(group: list[int], best: Island, off: float, half: float, app: float, pc: ClassPrior) -> bool | None:
+    """What one view of a legged object says of a single central support (a pedestal): True for one leg-sized island
+    on the box's centre line under a box much wider than it; False for several legs, or one island wider than a leg
+    or under a box not much wider; ``None`` (no telling) for one leg-sized island off the centre line or a box of
+    unknown width: one leg of a four-legged object whose others are hidden, or a neighbour's leg beside a support
+    the LIDAR does not see. ``off``: the island's angular offset from the bisector, ``half`` the box's half-angle
+    (rad); ``app``: the box's width at the island's range (m, NaN if unknown)."""
+    if len(group) != 1 or best.physical_extent > pc.leg_size_max:
+        return False
+    if not (abs(off) < 0.25 * half and math.isfinite(app)):
+        return None
+    return app > 3.0 * max(best.extent, 0.05)
 
 
 def _see_through(area: BoundingArea, pc: ClassPrior, r_front: float, beam_b: FloatArray, beam_r: FloatArray) -> bool:

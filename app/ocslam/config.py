@@ -440,6 +440,13 @@ class ConsciousnessConfig:
         help="improved: Y_c of the soft decision: the new box's confidence (the paper), the mean or the best of the object's counted frames",
         live=True,
     )
+    hidden_behind_boxes: bool = param(
+        True,
+        help="improved, ghost decay: an object whose image column and height a box of the frame covers, the box's object "
+        "standing nearer (its bottom edge's range), is hidden from the camera by it: no clear miss (an extinguisher behind "
+        "a chair the LIDAR sees through)",
+        live=True,
+    )
     box_explains_one: bool = param(
         True,
         help="improved, ghost decay: a box that gave an object in this frame explains no other object in its wedge "

@@ -2,8 +2,8 @@
 
 A frame is a *clear miss* for an object when its centre projects inside the image, at least
 ``clear_view_in_frame`` of its outline's image box is inside the image (the detector's labelling rule),
-it lies within ``decay_max_range_m``, no box of its class covers its bearing, and the LIDAR does not see something in
-front of it. An object decays only once its clear misses outnumber its detections.
+it lies within ``decay_max_range_m``, no box of its class covers its bearing, no box of a nearer object covers its
+image column and height (:func:`hidden_behind`), and the LIDAR does not see something in front of it. An object decays only once its clear misses outnumber its detections.
 """
 
 from __future__ import annotations
@@ -28,6 +28,39 @@ from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track
 
 FloatArray = NDArray[np.float64]
+
+
+def hidden_behind(
+    corners: FloatArray, heights_m: FloatArray, areas: Sequence[BoundingArea], T_base_map: Pose2, cam: CameraModel, margin_m: float
+) -> NDArray[np.bool_]:
+    """``(N,)`` True where one box of the frame hides an object from the camera: the box covers the image columns of
+    all of the object's footprint ``corners`` ``(N, 4, 2)`` (map) and reaches above its top (``heights_m`` ``(N,)``),
+    and the box's object stands more than ``margin_m`` nearer than the object's nearest corner (its bottom edge's
+    range; a box cut by the image's bottom: nearer still). A chair's legs let the LIDAR see an extinguisher behind
+    it, its seat and back do not let the camera."""
+    n = len(corners)
+    hid = np.zeros(n, dtype=bool)
+    if not n or not areas:
+        return hid
+    c_base = T_base_map.transform_points(corners.reshape(-1, 2))
+    p = np.empty((len(c_base), 3))
+    p[:, :2] = c_base
+    p[:, 2] = np.repeat(heights_m, corners.shape[1])
+    uv, depth = cam.project(p)
+    if not np.all(depth > 0.05):
+        ok = (depth > 0.05).reshape(n, -1).all(axis=1)
+    else:
+        ok = np.ones(n, dtype=bool)
+    u = uv[:, 0].reshape(n, -1)
+    v_top = uv[:, 1].reshape(n, -1).min(axis=1)  # the highest image row of the object's top outline
+    r = np.hypot(c_base[:, 0] - cam.center_base[0], c_base[:, 1] - cam.center_base[1]).reshape(n, -1).min(axis=1)
+    with np.errstate(invalid="ignore"):
+        u_lo, u_hi = u.min(axis=1), u.max(axis=1)
+        for a in areas:
+            x1, y1, x2, _y2 = a.box_px.tolist()
+            near = a.near_range_m if a.bottom_reliable else 0.0
+            hid |= ok & (x1 <= u_lo) & (u_hi <= x2) & (v_top >= y1) & (near < r - margin_m)
+    return hid
 
 
 def decay_tracks(
@@ -79,7 +112,12 @@ def decay_tracks(
                 if rows.any():
                     held[rows] |= a.contains_bearing(b[rows], margin=0.05)
             explained = {boxed[r] for r in np.flatnonzero(held).tolist()}
-        missed = {id(cand[k]) for k in view if k not in explained}
+        unexplained = [k for k in view if k not in explained]
+        if cfg.hidden_behind_boxes and unexplained:
+            corners = np.stack([cand[k].footprint.corners for k in unexplained])
+            hid = hidden_behind(corners, heights[unexplained], areas, T_base_map, cam, float(cfg.occlusion_margin_m))
+            unexplained = [k for k, h in zip(unexplained, hid.tolist()) if not h]
+        missed = {id(cand[k]) for k in unexplained}
     if not missed:
         return list(tracks)
     keep = []

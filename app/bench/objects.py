@@ -32,13 +32,14 @@ import numpy as np
 
 from app.bench.common import print_json, table
 from app.commands.run import add_config_arguments, config_from_args
-from app.sweep.suite import RANDOM_FAMILIES
 
 KEYS = ("in_scene", "in_map", "tp", "fn", "fp_legs", "fp_corner", "fp_other", "precision_strict",
         "precision_lenient", "recall", "f1", "pos_err_mean_m", "pos_err_max_m")
 SUITES = ("zoo-dev", "zoo-test", "random")
 #: the zoo and its dev/test split
 ZOO_DIR = Path(__file__).resolve().parents[2] / "assets" / "worlds" / "zoo"
+#: families of the ``random`` suite, cycled with the seed
+RANDOM_FAMILIES = ("corridor", "lshape", "openplan")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

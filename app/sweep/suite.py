@@ -30,8 +30,6 @@ from typing import Any
 
 #: config sections that do not change a recording (the consciousness is re-run by every trial)
 NOT_RECORDED = ("consciousness", "ui", "server", "replay")
-#: random-suite families, cycled with the seed (as ``ocslam bench objects --suite random``)
-RANDOM_FAMILIES = ("corridor", "lshape", "openplan")
 
 
 class SuiteError(ValueError):
@@ -67,8 +65,10 @@ def suite_worlds(suite: Any, only: list[str] | None = None) -> list[World]:
         if not (isinstance(r, list) and len(r) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in r)):
             raise SuiteError(f"suite.random: expected [first_seed, last_seed] (integers), got {r!r}")
         first, last = r
-        worlds = [World(f"{RANDOM_FAMILIES[(s - first) % 3]} {s}", seed=s, family=RANDOM_FAMILIES[(s - first) % 3])
-                  for s in range(first, last + 1)]
+        # the families cycled with the seed, as in `ocslam bench objects --suite random`
+        from app.bench.objects import RANDOM_FAMILIES as fam
+
+        worlds = [World(f"{fam[(s - first) % len(fam)]} {s}", seed=s, family=fam[(s - first) % len(fam)]) for s in range(first, last + 1)]
     elif isinstance(suite, dict) and len(suite) == 1 and "bags" in suite:
         bags = suite["bags"]
         if not isinstance(bags, list) or not all(isinstance(b, str) for b in bags):

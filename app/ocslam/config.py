@@ -442,9 +442,9 @@ class ConsciousnessConfig:
     )
     hidden_behind_boxes: bool = param(
         True,
-        help="improved, ghost decay: an object whose image column and height a box of the frame covers, the box's object "
-        "standing nearer (its bottom edge's range), is hidden from the camera by it: no clear miss (an extinguisher behind "
-        "a chair the LIDAR sees through)",
+        help="improved, ghost decay: an object whose image columns and top one box of the frame covers, the box's object "
+        "standing nearer (its bottom edge's range), is hidden from the camera by it: no clear miss (a chair behind another "
+        "chair's box, whose legs the LIDAR sees through)",
         live=True,
     )
     box_explains_one: bool = param(

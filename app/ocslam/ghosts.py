@@ -3,7 +3,8 @@
 A frame is a *clear miss* for an object when its centre projects inside the image, at least
 ``clear_view_in_frame`` of its outline's image box is inside the image (the detector's labelling rule),
 it lies within ``decay_max_range_m``, no box of its class covers its bearing, no box of a nearer object covers its
-image column and height (:func:`hidden_behind`), and the LIDAR does not see something in front of it. An object decays only once its clear misses outnumber its detections.
+image columns and top (:func:`hidden_behind`), and the LIDAR does not see something in front of it. An object decays
+only once its clear misses outnumber its detections.
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ def hidden_behind(
     """``(N,)`` True where one box of the frame hides an object from the camera: the box covers the image columns of
     all of the object's footprint ``corners`` ``(N, 4, 2)`` (map) and reaches above its top (``heights_m`` ``(N,)``),
     and the box's object stands more than ``margin_m`` nearer than the object's nearest corner (its bottom edge's
-    range; a box cut by the image's bottom: nearer still). A chair's legs let the LIDAR see an extinguisher behind
-    it, its seat and back do not let the camera."""
+    range; a box cut by the image's bottom: nearer still). A chair's legs let the LIDAR see an object behind it,
+    its seat and back do not let the camera."""
     n = len(corners)
     hid = np.zeros(n, dtype=bool)
     if not n or not areas:
@@ -47,10 +48,7 @@ def hidden_behind(
     p[:, :2] = c_base
     p[:, 2] = np.repeat(heights_m, corners.shape[1])
     uv, depth = cam.project(p)
-    if not np.all(depth > 0.05):
-        ok = (depth > 0.05).reshape(n, -1).all(axis=1)
-    else:
-        ok = np.ones(n, dtype=bool)
+    ok = (depth > 0.05).reshape(n, -1).all(axis=1)  # every corner in front of the camera
     u = uv[:, 0].reshape(n, -1)
     v_top = uv[:, 1].reshape(n, -1).min(axis=1)  # the highest image row of the object's top outline
     r = np.hypot(c_base[:, 0] - cam.center_base[0], c_base[:, 1] - cam.center_base[1]).reshape(n, -1).min(axis=1)

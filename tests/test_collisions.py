@@ -31,15 +31,18 @@ def test_shared_fractions_equal_the_kd_trees_on_the_gap_too() -> None:
         assert shared_fractions(a, b, cfg) == want
 
 
-def _table_track(track_id: int, points: np.ndarray, hits: int, frames: dict[float, tuple[int, tuple[float, float]]]):
-    """A table track on ``points`` (each voxel seen ``hits`` times), seen at each stamp of ``frames`` through
-    ``(box index, box columns)``."""
+def _table_track(track_id: int, points: np.ndarray, hits: int, frames: dict[float, tuple[int, tuple[float, float]]],
+                 label: str = "table"):
+    """A track (a table's by default) on ``points`` (each voxel seen ``hits`` times), seen at each stamp of
+    ``frames`` through ``(box index, box columns)``; legged classes seen as legs."""
     from app.ocslam.candidate import Candidate
+    from app.ocslam.classes import prior
     from app.ocslam.config import ConsciousnessConfig
     from app.ocslam.tracks import create_track
 
-    c = Candidate(0, "table", 0.9, "lidar_legs", points, None, 3.0, ray_origin=np.array([0.0, 0.0]),
-                  ray_dir=np.array([1.0, 0.0]), ray_weight=1.0, legs=True)
+    legs = prior(label).legged
+    c = Candidate(0, label, 0.9, "lidar_legs" if legs else "lidar_island", points, None, 3.0, ray_origin=np.array([0.0, 0.0]),
+                  ray_dir=np.array([1.0, 0.0]), ray_weight=1.0, legs=legs)
     t = create_track(track_id, c, 0.0, -1, ConsciousnessConfig(), None)
     for _ in range(hits - 1):
         t.evidence.add_points(points)
@@ -168,3 +171,27 @@ def test_what_one_view_says_of_a_single_support():
     assert _support([0], leg, 0.1, half, 1.2, table) is None  # off the centre line
     assert _support([0], leg, 0.01, half, float("nan"), table) is None
     assert _support([0], leg, np.float64(0.01), half, 1.2, table) is True
+
+
+@pytest.mark.parametrize("case", ["flowers at a corner", "flowers mid-side", "person at a corner", "rule off"])
+def test_a_legged_objects_corner_leg_is_its_own(case: str):
+    """A desk's four legs at the corners of its rectangle; a smaller object's track on the points of one of them
+    (flowers boxed behind the desk's near corner leg, the LIDAR seeing the leg in the flowers' box). The leg is the
+    desk's (``corner_leg_owner``): the flowers lose it, and with nothing else of their own are no object. Shared
+    points between the corners stay with the nested object, as do a legged object's (a chair's legs under a table's
+    edge, a person's leg beside a desk's)."""
+    corners = [(3.4, 0.2), (3.4, 0.9), (4.6, 0.2), (4.6, 0.9)]
+    legs = np.vstack([_square(x, y) for x, y in corners])
+    mid = _square(4.0, 0.9)
+    desk_pts = np.vstack([legs, mid]) if case == "flowers mid-side" else legs
+    desk = _table_track(0, desk_pts, 6, {})
+    label = "person" if case == "person at a corner" else "flowers"
+    other = _table_track(1, mid if case == "flowers mid-side" else _square(4.6, 0.9), 3, {}, label=label)
+    kept = {t.id: t for t in _collide([desk, other], corner_leg_owner=case != "rule off")}
+    if case == "flowers at a corner":
+        assert set(kept) == {0}
+        assert len(kept[0].evidence.points) == len(legs)  # the desk keeps its corner leg
+    else:
+        assert set(kept) == {0, 1}  # the nested object keeps the shared points; the desk keeps its others
+        shared = mid if case == "flowers mid-side" else _square(4.6, 0.9)
+        assert np.min(np.hypot(*(kept[0].evidence.points[:, None, :] - shared.mean(axis=0)).T)) > 0.05

@@ -227,6 +227,34 @@ def border_piece_of(a: Track, b: Track, cfg: ConsciousnessConfig) -> Track | Non
     return piece if contiguous(piece.evidence.points, whole.evidence.points, whole.prior, gap) else None
 
 
+def corner_leg(small: Track, small_pts: FloatArray, big: Track, big_pts: FloatArray, cfg: ConsciousnessConfig) -> bool:
+    """True if the points a smaller solid object (``small``, not of a legged class) shares with ``big`` are
+    ``big``'s own leg: ``big`` is legged furniture seen as legs in most of its views, and every shared point (of ``small_pts`` within half the
+    island gap of ``big_pts``, both ``(K, 2)`` well-seen points, ``map``) lies within ``leg_corner_m`` of
+    one corner of the rectangle of ``big``'s points, where a leg stands (the shape prior of
+    :func:`~app.ocslam.area_candidate.corner_legs`). A chair pushed under a table's edge shares the legs
+    between the table's corners, a person's leg stands beside a chair's; a false table made of a chair's
+    legs shares them at all its corners."""
+    corner_m = float(cfg.leg_corner_m)
+    ev = big.evidence
+    if not cfg.corner_leg_owner or corner_m <= 0.0 or small.prior.legged or not big.prior.legged or 2 * ev.leg_obs <= ev.observations:
+        return False
+    d, _ = cKDTree(big_pts).query(small_pts, k=1)
+    on = small_pts[d <= shared_gap(cfg)]
+    if len(on) == 0 or len(big_pts) < 3:
+        return False
+    th, lo, hi = min_area_rect(big_pts)
+    c, s = math.cos(th), math.sin(th)
+    u = on[:, 0] * c + on[:, 1] * s
+    v = -on[:, 0] * s + on[:, 1] * c
+    du0, du1 = np.abs(u - lo[0]), np.abs(u - hi[0])
+    dv0, dv1 = np.abs(v - lo[1]), np.abs(v - hi[1])
+    near_u, near_v = du1 < du0, dv1 < dv0  # which corner each point is nearest
+    dist = np.hypot(np.minimum(du0, du1), np.minimum(dv0, dv1))
+    one_corner = bool(np.all(near_u == near_u[0]) and np.all(near_v == near_v[0]))
+    return one_corner and bool(np.all(dist <= corner_m))
+
+
 def _sharing(a: Track, b: Track, cfg: ConsciousnessConfig) -> tuple[FloatArray, FloatArray] | None:
     """Both objects' well-seen points (:func:`strong_points`) if at least ``shared_evidence_fraction`` of
     one's lie on the other's, else None."""
@@ -358,9 +386,13 @@ def resolve_track_collisions(
                     ((a, fa, shared[0]), (b, fb)) if fa.area <= fb.area else ((b, fb, shared[1]), (a, fa))
                 )
                 if small_fp.area < 0.5 * big_fp.area and not small.partial_only:
-                    if strip_points(big, small_pts, cfg, known_free):
+                    big_pts = shared[1] if small is a else shared[0]
+                    # the shared points go to their owner: a legged object's leg at its corner is its
+                    # own (a vase behind a desk's corner leg), else the nested object's (a chair's legs)
+                    loser, lost_pts = (small, big_pts) if corner_leg(small, small_pts, big, big_pts, cfg) else (big, small_pts)
+                    if strip_points(loser, lost_pts, cfg, known_free):
                         continue
-                    drop = big
+                    drop = loser
                 else:
                     ka = (a.complete_views > 0, a.presence, a.frames, a.detections, -a.created)
                     kb = (b.complete_views > 0, b.presence, b.frames, b.detections, -b.created)

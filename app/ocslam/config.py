@@ -434,6 +434,13 @@ class ConsciousnessConfig:
         help="improved: a leg island farther than this from every corner of its group's rectangle is not one of its legs (0: off)",
         live=True,
     )
+    corner_leg_owner: bool = param(
+        True,
+        help="improved, collisions: points a smaller object of another class shares with legged furniture at a corner "
+        "of its footprint are that furniture's leg, not the smaller object's (a vase seen behind a desk's corner leg; "
+        "elsewhere the nested object keeps them: a chair's legs under a table's edge)",
+        live=True,
+    )
     presence_confidence: str = param(
         "best",
         choices=("latest", "mean", "best"),

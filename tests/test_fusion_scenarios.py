@@ -193,3 +193,24 @@ def test_a_round_table_with_stools_round_its_pedestal(where, fraction: float):
     tables = found(c, "table")
     assert len(tables) == 1
     assert bool(near(tables, tx, ty, 0.2)) == (fraction > 0.0), (tables[0].pose.x, tables[0].pose.y)
+
+
+@pytest.mark.parametrize("fraction", [0.7, 1.0])
+def test_a_box_as_wide_as_the_image_makes_no_object_but_sees_one(fraction: float):
+    """A bookcase (1.2 m × 0.35 m, 1.8 m tall) met face-on from 0.9 m: its boxes span the whole image and show none
+    of its sides, as the detector's boxes at a wall filling the view do. With ``wide_box_fraction`` they make no
+    object (with 1.0, the rule off, they do); the same bookcase approached from 3 m is made by its narrower boxes
+    and stays while the wide ones see it."""
+    shelf = Box(3.0, 0.0, 0.35, 1.2, 0, 0, 1.8)
+    close = straight(12, 1.95, 0.0, 2.15, 0.0)
+    T0 = close[0]
+    box = detection("shelf", [shelf], T0, CAM, 0.9)
+    assert box is not None and (box.x2 - box.x1) >= 0.95 * CAM.info.width  # wide
+    c = make(wide_box_fraction=fraction)
+    run(c, [shelf], [("shelf", shelf)], close)
+    assert len(found(c, "shelf")) == (0 if fraction < 1.0 else 1)
+
+    c = make(wide_box_fraction=fraction)
+    run(c, [shelf], [("shelf", shelf)], straight(20, 0.0, 0.0, 2.1, 0.0) + close)
+    shelves = found(c, "shelf")
+    assert len(shelves) == 1 and near(shelves, 3.0, 0.0, 0.3)

@@ -1,7 +1,8 @@
 """Association (the paper's assumption 5): which tracked object a candidate or a box is.
 
 :func:`associate` matches a frame's candidate (points, a ground-plane placement) with a tracked object
-of its class; :func:`sighting` and :func:`bearing_match` let a box that gave no object still see an
+of its class (a candidate of a box about as wide as the image joins one or is dropped: :func:`wide_box`);
+:func:`sighting` and :func:`bearing_match` let a box that gave no object still see an
 object the LIDAR has confirmed (bearing-only association).
 """
 
@@ -63,6 +64,16 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
         if match and d < best_d:
             best, best_d = t, d
     return best
+
+
+def wide_box(cols: tuple[float, float] | None, image_width: float, fraction: float) -> bool:
+    """True if a box's columns ``(x1, x2)`` (pixels) span at least ``fraction`` of the image's width
+    (``fraction`` ≥ 1 or unknown columns: never). Such a box shows no side of its object: the camera is too
+    close to see its extent, and a detector fires so at surfaces filling the view (a wall, a shelf's side),
+    so it may confirm an object made before but makes none."""
+    if cols is None or fraction >= 1.0 or image_width <= 0:
+        return False
+    return float(cols[1]) - float(cols[0]) >= fraction * float(image_width)
 
 
 def sighting(area: BoundingArea, T_map_scan: Pose2, stamp: float, kf: int, cfg: ConsciousnessConfig) -> Sighting:

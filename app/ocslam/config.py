@@ -485,6 +485,13 @@ class ConsciousnessConfig:
         "shared LIDAR point stays with the one that saw it more often (two round tables seen along one line; 0: off)",
         live=True,
     )
+    wide_box_fraction: float = param(
+        0.7, min=0.0, max=1.0, step=0.05,
+        help="improved: a box at least this share of the image wide makes no new object, it only sees one made before: "
+        "the camera is too close to show the object's extent, and such boxes are the detector's answer to a surface "
+        "filling the view (a wall, a shelf's side; 1: off)",
+        live=True,
+    )
     pedestal_fraction: float = param(
         0.8, min=0.0, max=1.0, step=0.05,
         help="improved: a legged object seen as one small island on its box's centre line in at least this share of its "

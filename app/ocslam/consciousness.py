@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 from shapely.geometry import Polygon
 
 from app.ocslam.area_candidate import area_candidate
-from app.ocslam.association import associate, bearing_match, sighting
+from app.ocslam.association import associate, bearing_match, sighting, wide_box
 from app.ocslam.calibration import ScoreCalibration
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
@@ -366,6 +366,9 @@ class Consciousness:
             if cand is None or cand.status == "collision":
                 continue
             t = associate(cand, self._tracks, self._stamp, cfg)
+            if t is None and wide_box(cand.box_cols, float(cam.info.width), float(cfg.wide_box_fraction)):
+                rep.reject("wide_box_new")  # confirms an object seen before, makes none
+                continue
             if t is None:
                 t = create_track(self._next_id, cand, stamp, kf, cfg, self._known_free)
                 self._next_id += 1

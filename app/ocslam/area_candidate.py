@@ -19,7 +19,7 @@ from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import ClassPrior, prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import Footprint, linspace, min_area_rect
+from app.ocslam.footprint import Footprint, linspace, min_area_rect, rect_corners_near
 from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.islands import Island, islands_linkage
 from app.ocslam.messages import OccupancyGrid
@@ -377,17 +377,10 @@ def corner_legs(group: list[int], islands: list[Island], corner_m: float) -> lis
     if corner_m <= 0.0:
         return group
     while len(group) > 2:
-        pts = np.vstack([islands[g].points for g in group])
-        th, lo, hi = min_area_rect(pts)
-        c, s = np.cos(th), np.sin(th)
+        rect = min_area_rect(np.vstack([islands[g].points for g in group]))
         worst, worst_d = -1, 0.0
         for j, g in enumerate(group):
-            p = islands[g].points
-            a = p[:, 0] * c + p[:, 1] * s
-            b = -p[:, 0] * s + p[:, 1] * c
-            da = np.minimum(np.abs(a - lo[0]), np.abs(a - hi[0]))
-            db = np.minimum(np.abs(b - lo[1]), np.abs(b - hi[1]))
-            dist = float(np.min(np.hypot(da, db)))
+            dist = float(np.min(rect_corners_near(islands[g].points, rect)[0]))
             if dist > worst_d:
                 worst, worst_d = j, dist
         if worst_d <= corner_m:

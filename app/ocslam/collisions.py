@@ -16,7 +16,7 @@ from app.ocslam.candidate import Candidate, FrameReport
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import min_area_rect
+from app.ocslam.footprint import min_area_rect, rect_corners_near
 from app.ocslam.footprint_estimate import estimate_footprint
 from app.ocslam.projection import BoundingArea
 from app.ocslam.tracks import (
@@ -243,16 +243,8 @@ def corner_leg(small: Track, small_pts: FloatArray, big: Track, big_pts: FloatAr
     on = small_pts[d <= shared_gap(cfg)]
     if len(on) == 0 or len(big_pts) < 3:
         return False
-    th, lo, hi = min_area_rect(big_pts)
-    c, s = math.cos(th), math.sin(th)
-    u = on[:, 0] * c + on[:, 1] * s
-    v = -on[:, 0] * s + on[:, 1] * c
-    du0, du1 = np.abs(u - lo[0]), np.abs(u - hi[0])
-    dv0, dv1 = np.abs(v - lo[1]), np.abs(v - hi[1])
-    near_u, near_v = du1 < du0, dv1 < dv0  # which corner each point is nearest
-    dist = np.hypot(np.minimum(du0, du1), np.minimum(dv0, dv1))
-    one_corner = bool(np.all(near_u == near_u[0]) and np.all(near_v == near_v[0]))
-    return one_corner and bool(np.all(dist <= corner_m))
+    dist, corner = rect_corners_near(on, min_area_rect(big_pts))
+    return bool(np.all(corner == corner[0]) and np.all(dist <= corner_m))
 
 
 def _sharing(a: Track, b: Track, cfg: ConsciousnessConfig) -> tuple[FloatArray, FloatArray] | None:

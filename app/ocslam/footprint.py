@@ -162,3 +162,17 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
     a1 = p[:, 0] * c + p[:, 1] * s
     b1 = -p[:, 0] * s + p[:, 1] * c
     return th, np.array([_MIN(a1), _MIN(b1)]), np.array([_MAX(a1), _MAX(b1)])
+
+
+def rect_corners_near(points: FloatArray, rect: tuple[float, FloatArray, FloatArray]) -> tuple[FloatArray, NDArray[np.int64]]:
+    """How far ``(N, 2)`` points lie from the nearest corner of a rectangle ``rect`` (:func:`min_area_rect`'s
+    ``(theta, lo, hi)``), and which corner that is: ``(dist (N,), corner (N,))``, the corner numbered
+    ``2·[nearer hi along e1] + [nearer hi along e2]`` (0…3)."""
+    th, lo, hi = rect
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    c, s = float(np.cos(th)), float(np.sin(th))
+    a = p[:, 0] * c + p[:, 1] * s
+    b = -p[:, 0] * s + p[:, 1] * c
+    a_lo, a_hi, b_lo, b_hi = np.abs(a - lo[0]), np.abs(a - hi[0]), np.abs(b - lo[1]), np.abs(b - hi[1])
+    dist = np.hypot(np.minimum(a_lo, a_hi), np.minimum(b_lo, b_hi))
+    return dist, 2 * (a_hi < a_lo).astype(np.int64) + (b_hi < b_lo).astype(np.int64)

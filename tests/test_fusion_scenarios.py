@@ -195,7 +195,7 @@ def test_a_round_table_with_stools_round_its_pedestal(where, fraction: float):
     assert bool(near(tables, tx, ty, 0.2)) == (fraction > 0.0), (tables[0].pose.x, tables[0].pose.y)
 
 
-@pytest.mark.parametrize("fraction", [0.7, 1.0])
+@pytest.mark.parametrize("fraction", [0.85, 1.0])
 def test_a_box_as_wide_as_the_image_makes_no_object_but_sees_one(fraction: float):
     """A bookcase (1.2 m × 0.35 m, 1.8 m tall) met face-on from 0.9 m: its boxes span the whole image and show none
     of its sides, as the detector's boxes at a wall filling the view do. With ``wide_box_fraction`` they make no

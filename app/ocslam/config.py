@@ -486,7 +486,7 @@ class ConsciousnessConfig:
         live=True,
     )
     wide_box_fraction: float = param(
-        0.7, min=0.0, max=1.0, step=0.05,
+        0.85, min=0.0, max=1.0, step=0.05,
         help="improved: a box at least this share of the image wide makes no new object, it only sees one made before: "
         "the camera is too close to show the object's extent, and such boxes are the detector's answer to a surface "
         "filling the view (a wall, a shelf's side; 1: off)",

@@ -68,9 +68,9 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
 
 def wide_box(cols: tuple[float, float] | None, image_width: float, fraction: float) -> bool:
     """True if a box's columns ``(x1, x2)`` (pixels) span at least ``fraction`` of the image's width
-    (``fraction`` ≥ 1 or unknown columns: never). Such a box shows no side of its object: the camera is too
-    close to see its extent, and a detector fires so at surfaces filling the view (a wall, a shelf's side),
-    so it may confirm an object made before but makes none."""
+    (``fraction`` ≥ 1 or unknown columns: never). Such a box shows little or nothing of its object's sides:
+    the camera is too close to see its extent, and a detector fires so at surfaces filling the view (a wall, a
+    shelf's side), so it may confirm an object made before but makes none."""
     if cols is None or fraction >= 1.0 or image_width <= 0:
         return False
     return float(cols[1]) - float(cols[0]) >= fraction * float(image_width)

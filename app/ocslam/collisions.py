@@ -228,16 +228,18 @@ def border_piece_of(a: Track, b: Track, cfg: ConsciousnessConfig) -> Track | Non
 
 
 def corner_leg(small: Track, small_pts: FloatArray, big: Track, big_pts: FloatArray, cfg: ConsciousnessConfig) -> bool:
-    """True if the points a smaller solid object (``small``, not of a legged class) shares with ``big`` are
-    ``big``'s own leg: ``big`` is legged furniture seen as legs in most of its views, and every shared point (of ``small_pts`` within half the
-    island gap of ``big_pts``, both ``(K, 2)`` well-seen points, ``map``) lies within ``leg_corner_m`` of
-    one corner of the rectangle of ``big``'s points, where a leg stands (the shape prior of
-    :func:`~app.ocslam.area_candidate.corner_legs`). A chair pushed under a table's edge shares the legs
-    between the table's corners, a person's leg stands beside a chair's; a false table made of a chair's
-    legs shares them at all its corners."""
+    """True if the points a smaller solid object (``small``, of a class without legs) shares with ``big`` are
+    ``big``'s own leg: ``big`` is legged furniture seen as legs in most of its views, and every shared point
+    (of ``small_pts`` within half the island gap of ``big_pts``; both ``(K, 2)`` well-seen points, ``map``)
+    lies within ``leg_corner_m`` of one and the same corner of the rectangle of ``big``'s points, where a leg
+    stands (the shape prior of :func:`~app.ocslam.area_candidate.corner_legs`). A chair pushed under a
+    table's edge shares the legs between the table's corners, a person's leg stands beside a chair's; a
+    false table made of a chair's legs shares them at all its corners."""
     corner_m = float(cfg.leg_corner_m)
     ev = big.evidence
-    if not cfg.corner_leg_owner or corner_m <= 0.0 or small.prior.legged or not big.prior.legged or 2 * ev.leg_obs <= ev.observations:
+    if not cfg.corner_leg_owner or corner_m <= 0.0 or small.prior.legged or not big.prior.legged:
+        return False
+    if 2 * ev.leg_obs <= ev.observations:
         return False
     d, _ = cKDTree(big_pts).query(small_pts, k=1)
     on = small_pts[d <= shared_gap(cfg)]
@@ -380,7 +382,7 @@ def resolve_track_collisions(
                 if small_fp.area < 0.5 * big_fp.area and not small.partial_only:
                     big_pts = shared[1] if small is a else shared[0]
                     # the shared points go to their owner: a legged object's leg at its corner is its
-                    # own (a vase behind a desk's corner leg), else the nested object's (a chair's legs)
+                    # own (flowers seen behind a desk's corner leg), else the nested object's (a chair's legs)
                     loser, lost_pts = (small, big_pts) if corner_leg(small, small_pts, big, big_pts, cfg) else (big, small_pts)
                     if strip_points(loser, lost_pts, cfg, known_free):
                         continue

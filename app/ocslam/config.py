@@ -436,9 +436,9 @@ class ConsciousnessConfig:
     )
     corner_leg_owner: bool = param(
         True,
-        help="improved, collisions: points a smaller object of another class shares with legged furniture at a corner "
-        "of its footprint are that furniture's leg, not the smaller object's (a vase seen behind a desk's corner leg; "
-        "elsewhere the nested object keeps them: a chair's legs under a table's edge)",
+        help="improved, collisions: points a smaller object of a class without legs shares with legged furniture, all at "
+        "one corner of the rectangle of its points, are that furniture's leg, not the smaller object's (flowers seen "
+        "behind a desk's corner leg; elsewhere the nested object keeps them: a chair's legs under a table's edge)",
         live=True,
     )
     presence_confidence: str = param(

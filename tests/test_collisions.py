@@ -31,7 +31,7 @@ def test_shared_fractions_equal_the_kd_trees_on_the_gap_too() -> None:
         assert shared_fractions(a, b, cfg) == want
 
 
-def _table_track(track_id: int, points: np.ndarray, hits: int, frames: dict[float, tuple[int, tuple[float, float]]],
+def _track(track_id: int, points: np.ndarray, hits: int, frames: dict[float, tuple[int, tuple[float, float]]],
                  label: str = "table"):
     """A track (a table's by default) on ``points`` (each voxel seen ``hits`` times), seen at each stamp of
     ``frames`` through ``(box index, box columns)``; legged classes seen as legs."""
@@ -81,8 +81,8 @@ def test_two_tables_boxed_side_by_side_frame_after_frame_stay_two(overlap: bool)
     ped_a, ped_b = _square(3.4, 0.9), _square(4.4, -0.1)
     cols_a = {1.0: (0, (40.0, 120.0)), 2.0: (1, (42.0, 122.0)), 3.0: (0, (44.0, 124.0))}
     cols_b = {1.0: (1, (130.0, 190.0)), 2.0: (0, (110.0 if overlap else 132.0, 192.0)), 3.0: (1, (134.0, 194.0))}
-    a = _table_track(0, np.vstack([ped_a, stool]), 6, cols_a)
-    b = _table_track(1, np.vstack([ped_b, stool]), 3, cols_b)
+    a = _track(0, np.vstack([ped_a, stool]), 6, cols_a)
+    b = _track(1, np.vstack([ped_b, stool]), 3, cols_b)
     b.evidence.add_points(ped_b)  # its own pedestal seen more often than the stool
     kept = _collide([a, b])
     if overlap:
@@ -92,8 +92,8 @@ def test_two_tables_boxed_side_by_side_frame_after_frame_stay_two(overlap: bool)
     pts = {t.id: t.evidence.points for t in kept}
     near_stool = lambda p: np.min(np.hypot(p[:, 0] - 3.9, p[:, 1] - 0.43)) < 0.2  # noqa: E731
     assert near_stool(pts[0]) and not near_stool(pts[1])  # the stool stays with the table that saw it more often
-    assert len(_collide([_table_track(0, np.vstack([ped_a, stool]), 6, cols_a),
-                         _table_track(1, np.vstack([ped_b, stool]), 3, cols_b)], seen_apart_frames=0)) == 1
+    assert len(_collide([_track(0, np.vstack([ped_a, stool]), 6, cols_a),
+                         _track(1, np.vstack([ped_b, stool]), 3, cols_b)], seen_apart_frames=0)) == 1
 
 
 @pytest.mark.parametrize("fraction", [0.8, 0.0])
@@ -111,9 +111,9 @@ def test_a_pedestal_joins_no_points_beside_it(fraction: float):
     from app.ocslam.se2 import Pose2
 
     ped, stool = _square(3.4, 0.9), np.vstack([_square(3.95 + 0.26 * i, 0.77 + 0.26 * j) for i in range(2) for j in range(2)])
-    table = _table_track(0, ped, 4, {})
+    table = _track(0, ped, 4, {})
     table.evidence.support_obs, table.evidence.corner_obs, table.evidence.observations = 4, 0, 4
-    other = _table_track(1, stool, 4, {})
+    other = _track(1, stool, 4, {})
     assert one_instance(table, other, False, fraction) == (fraction == 0.0)
 
     cfg = ConsciousnessConfig()
@@ -184,9 +184,9 @@ def test_a_legged_objects_corner_leg_is_its_own(case: str):
     legs = np.vstack([_square(x, y) for x, y in corners])
     mid = _square(4.0, 0.9)
     desk_pts = np.vstack([legs, mid]) if case == "flowers mid-side" else legs
-    desk = _table_track(0, desk_pts, 6, {})
+    desk = _track(0, desk_pts, 6, {})
     label = "person" if case == "person at a corner" else "flowers"
-    other = _table_track(1, mid if case == "flowers mid-side" else _square(4.6, 0.9), 3, {}, label=label)
+    other = _track(1, mid if case == "flowers mid-side" else _square(4.6, 0.9), 3, {}, label=label)
     kept = {t.id: t for t in _collide([desk, other], corner_leg_owner=case != "rule off")}
     if case == "flowers at a corner":
         assert set(kept) == {0}

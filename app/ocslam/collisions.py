@@ -239,11 +239,11 @@ def corner_leg(small: Track, small_pts: FloatArray, big: Track, big_pts: FloatAr
     ev = big.evidence
     if not cfg.corner_leg_owner or corner_m <= 0.0 or small.prior.legged or not big.prior.legged:
         return False
-    if 2 * ev.leg_obs <= ev.observations:
+    if 2 * ev.leg_obs <= ev.observations or len(big_pts) < 3:
         return False
     d, _ = cKDTree(big_pts).query(small_pts, k=1)
     on = small_pts[d <= shared_gap(cfg)]
-    if len(on) == 0 or len(big_pts) < 3:
+    if len(on) == 0:
         return False
     dist, corner = rect_corners_near(on, min_area_rect(big_pts))
     return bool(np.all(corner == corner[0]) and np.all(dist <= corner_m))

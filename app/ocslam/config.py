@@ -485,6 +485,13 @@ class ConsciousnessConfig:
         "shared LIDAR point stays with the one that saw it more often (two round tables seen along one line; 0: off)",
         live=True,
     )
+    hidden_behind_own_face: bool = param(
+        True,
+        help="improved, footprints: the part of an object its points do not show lies behind its own face, not behind "
+        "a wall or another obstacle the map knows; a footprint extrapolated there is turned the other way (a shelf "
+        "against a wall seen from the side) or kept to its points",
+        live=True,
+    )
     wide_box_fraction: float = param(
         0.85, min=0.0, max=1.0, step=0.05,
         help="improved: a box at least this share of the image wide makes no new object, it only sees one made before: "

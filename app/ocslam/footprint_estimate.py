@@ -143,7 +143,11 @@ def _extension_free(
 
 
 def estimate_footprint(
-    ev: ObjectEvidence, pc: ClassPrior, ray_prior_weight: float = 1.0, known_free: FreeFn | None = None
+    ev: ObjectEvidence,
+    pc: ClassPrior,
+    ray_prior_weight: float = 1.0,
+    known_free: FreeFn | None = None,
+    depth_axis_hint: int | None = None,
 ) -> Footprint | None:
     """The object's footprint from its evidence and class prior (object frame). ``None`` if no evidence.
 
@@ -163,6 +167,12 @@ def estimate_footprint(
     centre on that support. ``known_free`` (``(N, 2)`` points → ``(N,)`` True where the occupancy grid
     knows free space) vetoes an extension into space the LIDAR has seen empty: the points were then the
     object's far side (an open shelf seen from inside).
+
+    Where ``known_free`` also knows obstacles (its ``occupied`` method, :class:`~app.ocslam.tracks.GridSpace`),
+    the part of the footprint the points do not show must lie behind the object's own face: when most of it
+    is seen, from every viewpoint, only through an obstacle away from the points (a wall), the object is
+    turned the other way round (``depth_axis_hint``: the rectangle axis of the points taken as the depth
+    axis), and kept to its points when that is no better (:func:`unseen_part_conflict`).
     """
     L, W = pc.length, pc.width
     if not ev.has_points:
@@ -208,7 +218,9 @@ def estimate_footprint(
     side = _one_sided_axes(views, center0, axes, d_obs / 2)
     depth_axis = -1
     one_face = False
-    if len(views):
+    if depth_axis_hint is not None and len(views):
+        depth_axis = int(depth_axis_hint)
+    elif len(views):
         long_ax = int(np.argmax(d_obs))
         if d_obs[long_ax] >= 0.15 and d_obs[1 - long_ax] <= 0.35 * d_obs[long_ax]:
             # one face (a line of points), even seen obliquely: its normal is the depth axis
@@ -322,4 +334,73 @@ def estimate_footprint(
         if d_obs[i] <= cap * 1.15:
             size[i] = max(size[i], 2.0 * max(s_opt[i] - lo[i], hi[i] - s_opt[i]))
     center = axes.T @ s_opt
-    return Footprint(center, th, float(size[0]), float(size[1]))
+    fp = Footprint(center, th, float(size[0]), float(size[1]))
+    occupied = getattr(known_free, "occupied", None)
+    if occupied is None or depth_axis_hint is not None:
+        return fp
+    if unseen_part_conflict(occupied, views, pts, axes, lo, hi, s_opt, size) <= 0.5:
+        return fp
+    alt = estimate_footprint(ev, pc, ray_prior_weight, known_free, depth_axis_hint=1 - depth_axis)
+    if alt is not None:
+        s_alt = axes @ alt.center
+        if unseen_part_conflict(occupied, views, pts, axes, lo, hi, s_alt, np.array([alt.size_x, alt.size_y])) <= 0.5:
+            return alt
+    return Footprint(center0, th, float(max(d_obs[0], 0.05)), float(max(d_obs[1], 0.05)))
+
+
+#: samples of a footprint this close to the rectangle of its points are the points' own (m)
+_OWN_M = 0.1
+#: steps along a line of sight (m)
+_STEP_M = 0.05
+
+
+def unseen_part_conflict(
+    occupied: FreeFn, views: FloatArray, pts: FloatArray, axes: FloatArray, lo: FloatArray, hi: FloatArray,
+    s_center: FloatArray, size: FloatArray,
+) -> float:
+    """The share of a footprint's extrapolated part that every viewpoint sees only through an obstacle that
+    is not the object (a wall behind it).
+
+    ``occupied``: ``(N, 2)`` points → True where the map knows an obstacle; ``views`` ``(V, 2)`` the
+    viewpoints; ``pts`` ``(N, 2)`` the object's points; ``axes`` ``(2, 2)`` the rectangle's axes (rows),
+    ``lo``, ``hi`` its points' extent and ``s_center``, ``size`` the footprint, in rectangle coordinates.
+    A 5 × 5 grid of the footprint's samples farther than 0.1 m from the points' rectangle is the
+    extrapolated part; a sample is hidden behind something else when the line of sight from each of (up
+    to three of) the viewpoints passes a known obstacle beyond the object's nearest point, farther than
+    0.1 m from every point of the object and short of the sample by 0.1 m. 0 when fewer than 3 samples are extrapolated.
+    """
+    if len(views) == 0 or len(pts) == 0:
+        return 0.0
+    a = linspace(float(s_center[0] - size[0] / 2 + 0.05), float(s_center[0] + size[0] / 2 - 0.05), 5)
+    b = linspace(float(s_center[1] - size[1] / 2 + 0.05), float(s_center[1] + size[1] / 2 - 0.05), 5)
+    S = np.empty((25, 2))
+    S[:, 0] = np.tile(a, 5)
+    S[:, 1] = np.repeat(b, 5)
+    out = ((S[:, 0] < lo[0] - _OWN_M) | (S[:, 0] > hi[0] + _OWN_M)
+           | (S[:, 1] < lo[1] - _OWN_M) | (S[:, 1] > hi[1] + _OWN_M))
+    if int(np.count_nonzero(out)) < 3:
+        return 0.0
+    P = S[out] @ axes  # rectangle coordinates → object frame
+    V = views[np.unique(np.linspace(0, len(views) - 1, min(3, len(views))).round().astype(np.int64))]
+    hidden = np.ones(len(P), dtype=bool)
+    for v in V:
+        d = P - v[None, :]
+        r = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+        n = int(np.ceil(float(r.max()) / _STEP_M))
+        if n < 3:
+            return 0.0
+        t = np.arange(1, n + 1) * _STEP_M  # (n,) distance from the viewpoint
+        Q = v[None, None, :] + t[None, :, None] * (d / np.maximum(r, 1e-9)[:, None])[:, None, :]  # (P, n, 2)
+        dp = pts - v[None, :]
+        front = float(np.sqrt((dp[:, 0] * dp[:, 0] + dp[:, 1] * dp[:, 1]).min()))
+        # on the line of sight past the object's nearest point, short of the sample: what stands in front of
+        # the object (hiding part of it) says nothing of its depth
+        before = (t[None, :] > front) & (t[None, :] < (r[:, None] - _OWN_M))
+        occ = occupied(Q.reshape(-1, 2)).reshape(len(P), n) & before
+        if occ.any():
+            hit = Q[occ]
+            occ[occ] = nearest_distances(hit, pts) > _OWN_M  # an obstacle that is not the object itself
+        hidden &= occ.any(axis=1)
+        if not hidden.any():
+            return 0.0
+    return float(np.count_nonzero(hidden)) / len(P)

@@ -179,24 +179,43 @@ def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typic
     return fits_instance(pc, float(d[0]), float(d[1]), typical)
 
 
-def grid_free_fn(grid: OccupancyGrid | None) -> FreeFn | None:
-    """``(N, 2)`` points (grid frame) → True where the occupancy grid knows free space."""
-    if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
-        return None
+class GridSpace:
+    """What the occupancy grid knows of ``(N, 2)`` points (grid frame): called, True where it knows free
+    space (a :data:`~app.ocslam.footprint_estimate.FreeFn`); :meth:`occupied`, True where it knows an
+    obstacle (``None`` when the footprint must not ask: principle 20 switched off)."""
 
-    def free(points: FloatArray) -> NDArray[np.bool_]:
-        cells = grid.world_to_cell(points)
+    def __init__(self, grid: OccupancyGrid, occupied: bool = True) -> None:
+        self._grid = grid
+        if not occupied:
+            self.occupied = None  # type: ignore[assignment]
+
+    def _values(self, points: FloatArray) -> NDArray[np.int64]:
+        """``(N,)`` cell values, −1 (unknown) outside the grid."""
+        g = self._grid
+        cells = g.world_to_cell(points)
         r, c = cells[:, 0], cells[:, 1]
-        inside = (r >= 0) & (r < grid.height) & (c >= 0) & (c < grid.width)
+        inside = (r >= 0) & (r < g.height) & (c >= 0) & (c < g.width)
         if inside.all():
-            v = grid.data[r, c]
-            return (v >= 0) & (v < 20)
-        out = np.zeros(len(points), dtype=bool)
-        v = grid.data[r[inside], c[inside]]
-        out[inside] = (v >= 0) & (v < 20)
+            return g.data[r, c].astype(np.int64)
+        out = np.full(len(points), -1, dtype=np.int64)
+        out[inside] = g.data[r[inside], c[inside]]
         return out
 
-    return free
+    def __call__(self, points: FloatArray) -> NDArray[np.bool_]:
+        v = self._values(points)
+        return (v >= 0) & (v < 20)
+
+    def occupied(self, points: FloatArray) -> NDArray[np.bool_]:
+        """True where the grid knows an obstacle (occupancy ≥ 65, map_server's ``occupied_thresh``)."""
+        return self._values(points) >= 65
+
+
+def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True) -> GridSpace | None:
+    """A :class:`GridSpace` of ``grid`` (``None`` without a usable grid); ``occupied``: whether footprints
+    may ask it for known obstacles (``consciousness.hidden_behind_own_face``)."""
+    if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
+        return None
+    return GridSpace(grid, occupied)
 
 
 def along_ray_close(origin: FloatArray, a: FloatArray, b: FloatArray, thr: float, rel: float = 0.25) -> bool:

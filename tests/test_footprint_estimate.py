@@ -1,0 +1,98 @@
+"""The footprint's unseen part lies behind the object's own face (principle 20, `estimate_footprint`).
+
+An open shelf standing against a wall, seen obliquely from one place: its end panel and a stretch of
+its back panel make an L of points, and the box's apparent width (1.3 m) is taken across the line of
+sight. Without the map the shelf is completed 1.3 m deep along its end panel, through the wall; with
+the wall in the occupancy grid it is turned the other way round and stays in front of the wall.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.ocslam.classes import CLASS_PRIORS
+from app.ocslam.evidence import ObjectEvidence
+from app.ocslam.footprint import min_area_rect
+from app.ocslam.footprint_estimate import estimate_footprint, unseen_part_conflict
+from app.ocslam.messages import OccupancyGrid
+from app.ocslam.se2 import Pose2
+from app.ocslam.tracks import GridSpace
+
+WALL_Y = (7.25, 7.35)  # the wall's cells (its face at 7.25 m)
+
+
+def _shelf_evidence() -> ObjectEvidence:
+    ev = ObjectEvidence()
+    end = np.stack([np.full(12, 1.48), np.linspace(6.81, 7.13, 12)], axis=1)  # the end panel
+    back = np.stack([np.linspace(1.95, 2.2, 6), np.full(6, 7.0)], axis=1)  # the back panel, seen inside
+    ev.add_points(np.vstack([end, back]))
+    for o in np.stack([np.linspace(-0.95, -0.8, 5), np.linspace(5.35, 5.5, 5)], axis=1):
+        ev.add_ray(o, np.array([2.1, 7.2]) - o, 1.0, apparent_width=1.3)
+    return ev
+
+
+def _grid(wall: bool = True, blocker: bool = False) -> OccupancyGrid:
+    grid = OccupancyGrid(0.05, Pose2(-2.0, 4.0, 0.0), np.full((100, 120), -1, dtype=np.int8))
+    cc = grid.cell_centers().reshape(-1, 2)
+    d = np.full(len(cc), -1)
+    d[cc[:, 1] < 6.75] = 0  # seen free in front of the shelf
+    if wall:
+        d[(cc[:, 1] >= WALL_Y[0]) & (cc[:, 1] <= WALL_Y[1])] = 100
+    if blocker:  # a low cabinet between the robot and the shelf, hiding its near part
+        d[(np.abs(cc[:, 1] - 6.2) < 0.05) & (cc[:, 0] > 0.6) & (cc[:, 0] < 1.2)] = 100
+    d[(np.abs(cc[:, 0] - 1.48) < 0.03) & (cc[:, 1] > 6.8) & (cc[:, 1] < 7.15)] = 100  # the end panel itself
+    grid.data = d.astype(np.int8).reshape(100, 120)
+    return grid
+
+
+def _far_edge_y(fp) -> float:
+    c, s = np.cos(fp.yaw), np.sin(fp.yaw)
+    corners = np.array([[sx * fp.size_x / 2, sy * fp.size_y / 2] for sx in (-1, 1) for sy in (-1, 1)])
+    return float((fp.center[1] + corners @ np.array([s, c])).max())
+
+
+def test_a_shelf_against_a_wall_is_not_completed_through_the_wall():
+    ev, shelf = _shelf_evidence(), CLASS_PRIORS["shelf"]
+    blind = estimate_footprint(ev, shelf, known_free=GridSpace(_grid(), occupied=False))
+    assert _far_edge_y(blind) > WALL_Y[1]  # the mistake this rule mends: 1.3 m deep, through the wall
+    fp = estimate_footprint(ev, shelf, known_free=GridSpace(_grid()))
+    assert _far_edge_y(fp) <= WALL_Y[0] + 0.05
+    assert max(fp.size_x, fp.size_y) == pytest.approx(1.0, abs=0.15)  # along the wall now
+    assert min(fp.size_x, fp.size_y) == pytest.approx(0.4, abs=0.1)
+
+
+def test_without_a_wall_behind_it_the_footprint_is_unchanged():
+    """Unknown space behind the object (nothing known there) and an obstacle in *front* of it (hiding part
+    of it from the robot) say nothing against its depth."""
+    ev, shelf = _shelf_evidence(), CLASS_PRIORS["shelf"]
+    blind = estimate_footprint(ev, shelf, known_free=GridSpace(_grid(wall=False), occupied=False))
+    for grid in (_grid(wall=False), _grid(wall=False, blocker=True)):
+        fp = estimate_footprint(ev, shelf, known_free=GridSpace(grid))
+        np.testing.assert_allclose(fp.center, blind.center)
+        assert (fp.size_x, fp.size_y) == (blind.size_x, blind.size_y)
+
+
+def test_unseen_part_conflict_counts_samples_behind_a_wall():
+    """Known answers: a rectangle of points 1 m × 0.2 m at y 0..0.2 seen from (0.5, −2); the footprint
+    extends 1.0 m further back, to y = 1.2. The wall at y = 0.6 hides the samples beyond it: of the 5 × 5
+    samples (y = 0.05, 0.325, 0.6, 0.875, 1.15), the rows beyond the points' rectangle grown by 0.1 m are
+    extrapolated (20); the two rows behind the wall conflict (10; the row on it does not: a wall within 0.1 m
+    of a sample is its own). Without the wall, none."""
+    pts = np.stack([np.linspace(0.0, 1.0, 21), np.r_[np.zeros(11), np.full(10, 0.2)]], axis=1)
+    th, lo, hi = min_area_rect(pts)
+    axes = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
+    views = np.array([[0.5, -2.0]])
+    centre = np.array([0.5, 0.6])
+    size_xy = np.array([1.0, 1.2])
+    s_center = axes @ centre
+    size = np.abs(axes @ size_xy)  # the rectangle's axes are the map's, possibly swapped
+
+    def wall(p):
+        return np.abs(p[:, 1] - 0.6) < 0.03
+
+    def nothing(p):
+        return np.zeros(len(p), dtype=bool)
+
+    assert unseen_part_conflict(wall, views, pts, axes, lo, hi, s_center, size) == pytest.approx(10 / 20)
+    assert unseen_part_conflict(nothing, views, pts, axes, lo, hi, s_center, size) == 0.0

@@ -1,9 +1,10 @@
-"""The footprint's unseen part lies behind the object's own face (principle 20, `estimate_footprint`).
+"""Footprints completed from partial evidence (`estimate_footprint`): principles 20 and 21.
 
-An open shelf standing against a wall, seen obliquely from one place: its end panel and a stretch of
+Principle 20, the unseen part lies behind the object's own face: an open shelf standing against a wall, seen obliquely from one place: its end panel and a stretch of
 its back panel make an L of points, and the box's apparent width (1.3 m) is taken across the line of
 sight. Without the map the shelf is completed 1.3 m deep along its end panel, through the wall; with
 the wall in the occupancy grid it is turned the other way round and stays in front of the wall.
+Principle 21, an object is no wider across the line of sight than its boxes show it (by a margin).
 """
 
 from __future__ import annotations
@@ -96,3 +97,34 @@ def test_unseen_part_conflict_counts_samples_behind_a_wall():
 
     assert unseen_part_conflict(wall, views, pts, axes, lo, hi, s_center, size) == pytest.approx(10 / 20)
     assert unseen_part_conflict(nothing, views, pts, axes, lo, hi, s_center, size) == 0.0
+
+
+def _chair_with_table_legs(cap: float) -> ObjectEvidence:
+    """A dining chair's four legs (0.42 m apart, centre (3, 0)) and, 0.8–1.0 m to its left, two legs of the
+    table it stands at, all taken for the chair; seen from the front (−x) through boxes 0.5 m wide."""
+    ev = ObjectEvidence()
+    legs = np.array([[2.79, -0.21], [2.79, 0.21], [3.21, -0.21], [3.21, 0.21]])
+    table_legs = np.array([[2.79, 1.0], [3.21, 1.2]])
+    ev.add_points(np.vstack([legs, table_legs]))
+    for y in np.linspace(-0.3, 0.3, 6):
+        o = np.array([0.5, y])
+        ev.add_ray(o, np.array([3.0, 0.0]) - o, 1.0, apparent_width=0.5)
+    ev.box_width_cap = cap
+    return ev
+
+
+def test_points_spread_wider_than_the_box_are_not_all_the_objects():
+    """Principle 21 (``consciousness.box_width_cap``): the chair class's shapes go up to a 2.2 m sofa, so
+    without the cap the chair spans the table's legs too (1.4 m across the line of sight); with it, at
+    most 1.6 × the boxes' 0.5 m, and it stays on its own legs."""
+    chair = CLASS_PRIORS["chair"]
+    wide = estimate_footprint(_chair_with_table_legs(0.0), chair)
+    assert max(wide.size_x, wide.size_y) >= 1.3
+    fp = estimate_footprint(_chair_with_table_legs(1.6), chair)
+    assert max(fp.size_x, fp.size_y) <= 0.8 + 1e-9
+    # on the chair's side of the spread: it holds the chair's centre, not the far table leg
+    c, s = np.cos(fp.yaw), np.sin(fp.yaw)
+    R = np.array([[c, s], [-s, c]])  # map → footprint frame
+    half = np.array([fp.size_x, fp.size_y]) / 2 + 1e-9
+    assert np.all(np.abs(R @ (np.array([3.0, 0.0]) - fp.center)) <= half)
+    assert not np.all(np.abs(R @ (np.array([3.21, 1.2]) - fp.center)) <= half)

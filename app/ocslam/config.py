@@ -485,6 +485,13 @@ class ConsciousnessConfig:
         "shared LIDAR point stays with the one that saw it more often (two round tables seen along one line; 0: off)",
         live=True,
     )
+    box_width_cap: float = param(
+        1.6, min=0.0, max=5.0, step=0.1,
+        help="improved, footprints: across the line of sight an object spans at most this many times the apparent width "
+        "of its boxes (and 0.2 m more): points spread wider are partly something else's, such as a table's legs "
+        "beside a chair that the class's sofa-sized shapes would otherwise take in (0: off, the class's largest size)",
+        live=True,
+    )
     hidden_behind_own_face: bool = param(
         True,
         help="improved, footprints: the part of an object its points do not show lies behind its own face, not behind "

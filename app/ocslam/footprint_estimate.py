@@ -154,7 +154,8 @@ def estimate_footprint(
     1. The minimum-area rectangle of the points gives the orientation and the observed extents.
     2. The *depth* axis is the one most aligned with the viewing directions, the other is *tangential*.
        The box's apparent width measures the tangential extent; a tangential extent smaller than it
-       means part of the object was hidden or is not at the LIDAR height (legs).
+       means part of the object was hidden or is not at the LIDAR height (legs); points spread wider
+       than ``ev.box_width_cap`` times it (``consciousness.box_width_cap``) are partly something else's.
     3. Seen from one side only, the object extends away from the robot by the depth of the typical
        footprint whose face matches its width (:func:`depth_for_width`).
     4. The centre is the least-squares crossing of the bisector rays, constrained to the interval the
@@ -271,6 +272,11 @@ def estimate_footprint(
     legs = pc.legged and ev.leg_obs * 2 > ev.observations
     dep_nom, dep_min, dep_max = depth_for_width(t_tan, pc, legs)
     tan_max = L[2] if t_tan > W[2] else max(L[2], W[2])
+    k = float(ev.box_width_cap)
+    if k > 0.0 and np.isfinite(w_app):
+        # across the line of sight the object is no wider than its boxes show it: points spread wider are
+        # partly something else's (a table's legs beside a chair's), not a wider instance of the class
+        tan_max = min(tan_max, max(k * w_app, w_app + 0.2))
 
     s_lo, s_hi, s_prior, size, lam = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.ones(2)
     for i in range(2):

@@ -206,8 +206,9 @@ class GridSpace:
         return (v >= 0) & (v < 20)
 
     def occupied(self, points: FloatArray) -> NDArray[np.bool_]:
-        """True where the grid knows an obstacle (occupancy ≥ 65, map_server's ``occupied_thresh``)."""
-        return self._values(points) >= 65
+        """True where the grid knows the cell is not free (occupancy ≥ 20: what is not free space, as
+        :meth:`__call__` reads it; the sweep's compact grids keep exactly this split)."""
+        return self._values(points) >= 20
 
 
 def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True) -> GridSpace | None:

@@ -179,15 +179,19 @@ def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typic
     return fits_instance(pc, float(d[0]), float(d[1]), typical)
 
 
+#: occupancy below this (and known) is free space; at or above it the cell is not free
+FREE_BELOW = 20
+
+
 class GridSpace:
     """What the occupancy grid knows of ``(N, 2)`` points (grid frame): called, True where it knows free
-    space (a :data:`~app.ocslam.footprint_estimate.FreeFn`); :meth:`occupied`, True where it knows an
-    obstacle (``None`` when the footprint must not ask: principle 20 switched off)."""
+    space (a :data:`~app.ocslam.footprint_estimate.FreeFn`); ``occupied``, ``None`` or a function True where
+    it knows the cell is not free (occupancy ≥ :data:`FREE_BELOW`; the sweep's compact grids keep exactly this
+    split), which footprints ask for known obstacles (principle 20; ``None`` when it is switched off)."""
 
     def __init__(self, grid: OccupancyGrid, occupied: bool = True) -> None:
         self._grid = grid
-        if not occupied:
-            self.occupied = None  # type: ignore[assignment]
+        self.occupied: Callable[[FloatArray], NDArray[np.bool_]] | None = self._not_free if occupied else None
 
     def _values(self, points: FloatArray) -> NDArray[np.int64]:
         """``(N,)`` cell values, −1 (unknown) outside the grid."""
@@ -203,12 +207,10 @@ class GridSpace:
 
     def __call__(self, points: FloatArray) -> NDArray[np.bool_]:
         v = self._values(points)
-        return (v >= 0) & (v < 20)
+        return (v >= 0) & (v < FREE_BELOW)
 
-    def occupied(self, points: FloatArray) -> NDArray[np.bool_]:
-        """True where the grid knows the cell is not free (occupancy ≥ 20: what is not free space, as
-        :meth:`__call__` reads it; the sweep's compact grids keep exactly this split)."""
-        return self._values(points) >= 20
+    def _not_free(self, points: FloatArray) -> NDArray[np.bool_]:
+        return self._values(points) >= FREE_BELOW
 
 
 def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True) -> GridSpace | None:

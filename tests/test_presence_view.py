@@ -167,3 +167,45 @@ def test_visible_share_is_a_share_and_shrinks_with_the_extent(seed, extent, x, y
     s = _share(r, extent, fp)
     assert 0.0 <= s <= 1.0
     assert _share(r, extent + 0.5, fp) <= s + 1e-12   # a longer possible object hides at least as much
+
+
+def test_in_frame_boxes_sides_shrink_with_range():
+    """The smaller side of an object's image box halves when its distance doubles, and is 0 behind the camera."""
+    from app.ocslam.presence import in_frame_boxes
+
+    cam = default_camera()
+    corners = np.stack([_square(1.5, 0.0, 0.05), _square(3.0, 0.0, 0.05), _square(-2.0, 0.0, 0.05)])
+    frac, side = in_frame_boxes(corners, np.array([0.1, 0.1, 0.1]), Pose2(), cam)
+    assert frac[0] == pytest.approx(1.0) and frac[1] == pytest.approx(1.0)
+    assert side[0] / side[1] == pytest.approx(2.0, rel=0.15)
+    assert side[2] == 0.0 and frac[2] == 0.0
+    # the width of a 0.1 m object whose near face is 1.45 m ahead: fx·0.1/1.45 pixels
+    assert side[0] == pytest.approx(float(np.asarray(cam.info.K).reshape(3, 3)[0, 0]) * 0.1 / 1.45, rel=0.02)
+
+
+def test_a_duck_that_looks_small_is_not_a_clear_miss():
+    """A duck boxed from close by, then in view 2.4 m away without a box: its image box is ~12 px (in the detector's
+    320-px input) — the detector boxes about half of such objects, so those frames are no clear misses at
+    ``clear_view_min_px: 20``; with 0 every one is."""
+    from synthetic_scene import Box, detection, detections, raycast
+
+    from app.ocslam.config import ConsciousnessConfig
+    from app.ocslam.consciousness import Consciousness
+
+    cam = default_camera()
+    duck = Box(3.2, 0.0, 0.11, 0.11, 0.0, 0.0, 0.1)
+    wall = Box(5.0, 0.0, 0.1, 6.0, 0.0, 0.0, 2.0)
+    counts = {}
+    for min_px in (20.0, 0.0):
+        cfg = ConsciousnessConfig()
+        cfg.clear_view_min_px = min_px
+        c = Consciousness(cfg, cam)
+        for i in range(6):  # boxed from 1.2–1.0 m
+            T = Pose2(2.0 + 0.04 * i, 0.0, 0.0)
+            c.update(detections([detection("duck", duck, T, cam, 0.9)], cam), raycast([duck, wall], T, cam), T, stamp=0.2 * i)
+        (t,) = [t for t in c._tracks if t.label == "duck"]
+        for i in range(5):  # then 2.4 m from it, in view, no box
+            T = Pose2(0.8, 0.0, 0.0)
+            c.update(detections([], cam), raycast([duck, wall], T, cam), T, stamp=1.2 + 0.2 * i)
+        counts[min_px] = t.misses
+    assert counts[20.0] == 0 and counts[0.0] == 5

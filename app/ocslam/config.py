@@ -354,6 +354,13 @@ class ConsciousnessConfig:
         "inside the image (the detector's labels leave out objects less than half in the frame; 0: its centre alone)",
         live=True,
     )
+    clear_view_min_px: float = param(
+        20.0, min=0.0, max=240.0, step=1.0, unit="px",
+        help="improved: a frame without a box counts as a miss only when the part of the object's image box inside "
+        "the image is at least this many pixels on its smaller side, in the detector's 320-px-wide input (the detector "
+        "boxes half the objects that look smaller: a duck two metres away; 0: any size)",
+        live=True,
+    )
     clear_view_visible: float = param(
         0.5, min=0.0, max=1.0, step=0.05,
         help="improved: a frame without a box counts as a miss only when the LIDAR sees this share of the object, "

@@ -1,7 +1,8 @@
 """Ghost decay (improved mode): objects in clear view that no box explains lose presence.
 
 A frame is a *clear miss* for an object when its centre projects inside the image, at least
-``clear_view_in_frame`` of its outline's image box is inside the image (the detector's labelling rule),
+``clear_view_in_frame`` of its outline's image box is inside the image (the detector's labelling rule), that
+part's smaller side is at least ``clear_view_min_px`` (the detector rarely boxes an object that looks smaller),
 it lies within ``decay_max_range_m``, no box of its class covers its bearing, no box of a nearer object covers its
 image columns and top (:func:`hidden_behind`), and the LIDAR does not see something in front of it. An object decays
 only once its clear misses outnumber its detections.
@@ -20,7 +21,7 @@ from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.presence import (
     centers_in_camera_view,
     decay_presence,
-    in_frame_fractions,
+    in_frame_boxes,
     occluded_by_scan,
     visible_share,
 )
@@ -29,6 +30,10 @@ from app.ocslam.se2 import Pose2
 from app.ocslam.tracks import Track
 
 FloatArray = NDArray[np.float64]
+
+#: the width of the image the detector sees (its static input, whatever the camera's resolution):
+#: ``clear_view_min_px`` is measured there
+DETECTOR_INPUT_WIDTH_PX = 320.0
 
 
 def hidden_behind(
@@ -87,12 +92,15 @@ def decay_tracks(
         centers = np.array([t.footprint.center for t in cand if t.footprint is not None], dtype=np.float64).reshape(-1, 2)
         heights = np.array([t.prior.height[1] for t in cand], dtype=np.float64)
         in_view = centers_in_camera_view(centers, heights, T_base_map, cam, float(cfg.decay_max_range_m))
-        frame_share = float(cfg.clear_view_in_frame)
-        if frame_share > 0.0 and in_view.any():
-            # the detector's labels leave out objects less than half in the frame: a box is not expected
+        frame_share, min_side = float(cfg.clear_view_in_frame), float(cfg.clear_view_min_px)
+        if (frame_share > 0.0 or min_side > 0.0) and in_view.any():
+            # the detector's labels leave out objects less than half in the frame, and it rarely boxes one
+            # that looks small: a box is not expected
             idx = np.flatnonzero(in_view)
             corners = np.stack([cand[k].footprint.corners for k in idx.tolist()])
-            in_view[idx] = in_frame_fractions(corners, heights[idx], T_base_map, cam) >= frame_share
+            frac, side = in_frame_boxes(corners, heights[idx], T_base_map, cam)
+            side *= DETECTOR_INPUT_WIDTH_PX / float(cam.info.width)  # as the detector's input sees it
+            in_view[idx] = (frac >= frame_share) & (side >= min_side)
         view = np.flatnonzero(in_view).tolist()
         # of those, the ones explained by a box of their class whose wedge holds them
         boxed = [k for k in view if cand[k].label in labels]

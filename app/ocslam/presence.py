@@ -105,18 +105,21 @@ def centers_in_camera_view(
     return ok
 
 
-def in_frame_fractions(
+def in_frame_boxes(
     corners: FloatArray, heights_m: FloatArray, T_base_frame: Pose2, camera: CameraModel
-) -> FloatArray:
-    """``(N,)`` share of each object's image box inside the image: the box of its 3D outline (its
-    footprint's ``(N, 4, 2)`` corners in the frame, from the floor to ``(N,)`` heights) projected without
-    clipping, and how much of that box the image holds (the rule the detector's labels follow: an object
-    less than half in the frame is not labelled, so not expected to be boxed). 0 for an outline
-    reaching behind the camera (an object the camera is inside of, or beside)."""
+) -> tuple[FloatArray, FloatArray]:
+    """Each object's image box and how much of it the image holds: ``(fraction, side_px)``, both ``(N,)``.
+
+    The box is that of its 3D outline (its footprint's ``(N, 4, 2)`` corners in the frame, from the floor to
+    ``(N,)`` heights) projected without clipping; ``fraction`` is the share of that box inside the image (the
+    rule the detector's labels follow: an object less than half in the frame is not labelled, so not expected
+    to be boxed), ``side_px`` the smaller side of its part inside the image, in pixels (how large the detector
+    would see it). Both 0 for an outline reaching behind the camera (an object the camera is inside of, or
+    beside)."""
     c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2)
     n = len(c)
     if n == 0:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0)
     c_base = T_base_frame.transform_points(c.reshape(-1, 2)).reshape(n, 4, 2)
     p = np.empty((n, 8, 3))
     p[:, :4, :2] = c_base
@@ -130,12 +133,21 @@ def in_frame_fractions(
         u0, u1 = uv[:, :, 0].min(axis=1), uv[:, :, 0].max(axis=1)
         v0, v1 = uv[:, :, 1].min(axis=1), uv[:, :, 1].max(axis=1)
         area = np.maximum(u1 - u0, 1e-9) * np.maximum(v1 - v0, 1e-9)
-        inside = np.clip(np.minimum(u1, W) - np.maximum(u0, 0.0), 0.0, None) * np.clip(
-            np.minimum(v1, H) - np.maximum(v0, 0.0), 0.0, None
-        )
-        frac = inside / area
-    frac[~np.all(depth > 0.05, axis=1) | ~np.isfinite(frac)] = 0.0
-    return frac
+        w_in = np.clip(np.minimum(u1, W) - np.maximum(u0, 0.0), 0.0, None)
+        h_in = np.clip(np.minimum(v1, H) - np.maximum(v0, 0.0), 0.0, None)
+        frac = w_in * h_in / area
+        side = np.minimum(w_in, h_in)
+    bad = ~np.all(depth > 0.05, axis=1) | ~np.isfinite(frac) | ~np.isfinite(side)
+    frac[bad] = 0.0
+    side[bad] = 0.0
+    return frac, side
+
+
+def in_frame_fractions(
+    corners: FloatArray, heights_m: FloatArray, T_base_frame: Pose2, camera: CameraModel
+) -> FloatArray:
+    """``(N,)`` share of each object's image box inside the image (:func:`in_frame_boxes`)."""
+    return in_frame_boxes(corners, heights_m, T_base_frame, camera)[0]
 
 
 def angular_span(footprint: Footprint, T_frame_scan: Pose2) -> tuple[float, float, float]:

@@ -39,8 +39,7 @@ def _track_over(frames: int, misses: int, cfg: ConsciousnessConfig, conf: float 
 
 def test_known_answers():
     cfg = ConsciousnessConfig()
-    assert cfg.frames_for_presence == 5 and cfg.min_frames_for_presence == 4
-    cfg.min_frames_for_presence = 3
+    assert cfg.frames_for_presence == 5 and cfg.min_frames_for_presence == 3
     # boxed in each of its three frames, never missed: judged on three frames, so it reaches its confidence
     assert _track_over(3, 0, cfg).presence == 0.9
     # missed twice in clear view after its first frame: five frames it could have been seen in, three boxed it
@@ -100,9 +99,10 @@ def test_presence_sequence_of_an_object_boxed_in_every_frame():
 
 
 def test_judged_on_fewer_frames_the_mean_confidence_counts():
-    """Four frames, never missed (``F' = 4``): ``Y_c`` is the frames' mean, not the best box alone: 0.8375, where
-    the paper (``F = 5``, best box) gives 0.76 and the best box alone would give 0.95."""
+    """Four frames, never missed, judged on at least four (``F' = 4``): ``Y_c`` is the frames' mean, not the best box
+    alone: 0.8375, where the paper (``F = 5``, best box) gives 0.76 and the best box alone would give 0.95."""
     cfg = ConsciousnessConfig()
+    cfg.min_frames_for_presence = 4
     confs = [0.95, 0.95, 0.95, 0.5]
     t = create_track(0, _cand(confs[0]), 0.0, -1, cfg, None)
     for i, c in enumerate(confs[1:], start=1):

@@ -329,7 +329,7 @@ class ConsciousnessConfig:
         5, min=1, max=100, step=1, help="F: frames before an object counts as present (paper: 5)", live=True
     )
     min_frames_for_presence: int = param(
-        4, min=0, max=100, step=1,
+        3, min=0, max=100, step=1,
         help="improved: an object passed quickly (a turn) is also judged on the frames it could have been seen in "
         "(those that boxed it and its clear misses), at least this many, with their mean confidence, instead of F "
         "(0 or ≥ F: always F, the paper)",

@@ -150,6 +150,9 @@ def area_candidate(
                     reason = "size_far"
                 elif not (area.truncated["top"] or area.truncated["bottom"]) and app_h > pc.height[2] * k_size + 0.1:
                     reason = "size_far"
+                elif (cfg.box_height_check and not (area.truncated["top"] or area.truncated["bottom"])
+                      and app_h < pc.height[0] / k_size):
+                    reason = "corner_short"  # the box, at this island's range, is lower than any of its class
             leg_like = pc.legged and isl.physical_extent <= pc.leg_size_max
             cut = area.truncated["left"] or area.truncated["right"]  # its solid centre is unknown
             if reason is None and pc.solid_fraction > 0.0 and not leg_like and not cut:

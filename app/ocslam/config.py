@@ -341,6 +341,12 @@ class ConsciousnessConfig:
     max_object_range_m: float = param(
         3.5, min=0.5, max=20.0, step=0.1, unit="m", help="improved: ignore islands / ghost checks beyond this", live=True
     )
+    box_height_check: bool = param(
+        True,
+        help="improved: an island is not the object of an uncut box that would be lower at the island's range than "
+        "the class's lowest instance (over size_consistency_tolerance): a stool boxed as a shelf",
+        live=True,
+    )
     size_consistency_tolerance: float = param(
         0.6, min=0.05, max=5.0, step=0.05, help="improved: relative range error allowed by the box-size check", live=True
     )

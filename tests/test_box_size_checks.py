@@ -1,0 +1,34 @@
+"""The box-size checks of an area's islands (``area_candidate``): a box and an island are one object only when the
+box, at the island's range, is as large as some instance of its class."""
+
+from __future__ import annotations
+
+from app.ocslam.se2 import Pose2
+
+
+def test_a_box_lower_than_its_class_does_not_take_the_island():
+    """A 0.45 m stool boxed as a shelf (the detector's mistake): at the stool's range the box is 0.45 m high, lower
+    than any shelf (≥ 0.9 m, over the size tolerance), so its island is no shelf's (``corner_short``); without the
+    check the stool's island makes a shelf."""
+    from synthetic_scene import Box, default_camera, detection, detections, raycast
+
+    from app.ocslam.config import ConsciousnessConfig
+    from app.ocslam.consciousness import Consciousness
+
+    cam = default_camera()
+    stool = Box(2.0, 0.0, 0.4, 0.4, 0.0, 0.0, 0.45)
+    found = {}
+    for check in (True, False):
+        cfg = ConsciousnessConfig()
+        cfg.box_height_check = check
+        c = Consciousness(cfg, cam)
+        rejected: dict[str, int] = {}
+        for i in range(6):
+            T = Pose2(0.03 * i, 0.05 * i, 0.0)
+            rep = c.update(detections([detection("shelf", stool, T, cam, 0.95)], cam), raycast([stool], T, cam), T,
+                           stamp=0.2 * i)
+            for k, v in rep.rejected.items():
+                rejected[k] = rejected.get(k, 0) + v
+        found[check] = ([t.source for t in c._tracks if t.label == "shelf"], rejected.get("corner_short", 0))
+    assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
+    assert found[False][1] == 0 and "lidar_island" in found[False][0]

@@ -220,6 +220,36 @@ def test_every_miss_gets_its_cause_on_a_synthetic_run():
     assert "table #1 (table)" in chair_row["miss_detail"]
 
 
+def test_a_true_neighbour_beside_a_missed_object_is_no_merge():
+    """A table missed and a true chair pushed under its edge (the chair found where it stands): the table was not
+    merged into the chair (lost); a false chair on the table, or a true chair's object grown over the table, is."""
+    truth = [GroundTruthObject(0, "table", Pose2(0.0, 0.0, 0.0), _rect(0.0, 0.0, 1.6, 0.9), 0.0, 0.75, name="table"),
+             GroundTruthObject(1, "chair", Pose2(0.0, 0.5, 0.0), _rect(0.0, 0.5, 0.44, 0.44), 0.0, 0.9, name="chair")]
+    cases = {
+        "true chair beside": ([TrackedObject(1, "chair", Pose2(0.0, 0.52, 0.0), 0.44, 0.44, presence=0.95,
+                                             footprint=_rect(0.0, 0.52, 0.44, 0.44))], "lost"),
+        "false chair on it": ([TrackedObject(1, "chair", Pose2(0.0, 0.52, 0.0), 0.44, 0.44, presence=0.95,
+                                             footprint=_rect(0.0, 0.52, 0.44, 0.44)),
+                               TrackedObject(2, "chair", Pose2(0.5, 0.0, 0.0), 0.44, 0.44, presence=0.95,
+                                             footprint=_rect(0.5, 0.0, 0.44, 0.44))], "merged"),
+        "chair grown over it": ([TrackedObject(1, "chair", Pose2(0.0, 0.3, 0.0), 1.6, 1.3, presence=0.95,
+                                               footprint=_rect(0.0, 0.2, 1.6, 1.1))], "merged"),
+    }
+    for name, (tracked, cause) in cases.items():
+        report = evaluate_objects(tracked, truth, presence_threshold=0.8)
+        explain_misses(report, truth, tracked, None, presence_threshold=0.8)
+        causes = {r["name"]: r["cause"] for r in report.rows if r["kind"] == "truth"}
+        assert causes["chair"] == "tp" and causes["table"] == cause, name
+    # the other way round: the table found, the chair under its top missed — the table covers the chair as the
+    # true table does: no merge; a table object grown over the chair's place beyond the true top: a merge
+    for fp, cause in ((_rect(0.0, 0.0, 1.6, 0.9), "lost"), (_rect(0.0, 0.25, 1.6, 1.4), "merged")):
+        tracked = [TrackedObject(1, "table", Pose2(0.0, 0.0, 0.0), 1.6, 0.9, presence=0.95, footprint=fp)]
+        report = evaluate_objects(tracked, truth, presence_threshold=0.8)
+        explain_misses(report, truth, tracked, None, presence_threshold=0.8)
+        causes = {r["name"]: r["cause"] for r in report.rows if r["kind"] == "truth"}
+        assert causes["table"] == "tp" and causes["chair"] == cause
+
+
 def test_a_box_of_another_class_does_not_count_as_a_detection():
     truth = [GroundTruthObject(0, "gnome", Pose2(2.0, 0.0, 0.0), _rect(2.0, 0.0, 0.3, 0.3), 0.0, 1.0)]
     log = ObservationLog(1)

@@ -74,7 +74,10 @@ def _square(x: float, y: float, half: float) -> np.ndarray:
 
 
 def test_in_frame_fractions_known_answers():
-    from app.ocslam.presence import in_frame_fractions
+    from app.ocslam.presence import in_frame_boxes
+
+    def in_frame_fractions(*a):
+        return in_frame_boxes(*a)[0]
 
     cam = default_camera()
     hfov = 2.0 * math.atan(cam.info.width / (2.0 * cam.info.fx)) if hasattr(cam.info, "fx") else 1.04

@@ -92,6 +92,7 @@ def area_candidate(
     fx, fy = cam.info.fx, cam.info.fy
     x1, y1, x2, y2 = area.box_px
     half = max(area.half_angle, 1e-4)
+    uncut_v = not (area.truncated["top"] or area.truncated["bottom"])  # the box's height is its object's
     for i, isl in enumerate(islands):
         b, r = cam.bearing_ranges_scan(isl.points)
         r_front = float(r.min())
@@ -148,10 +149,9 @@ def area_candidate(
                     reason = "corner_size"
                 elif app_w > pc.apparent_width_max * k_size + 0.1:
                     reason = "size_far"
-                elif not (area.truncated["top"] or area.truncated["bottom"]) and app_h > pc.height[2] * k_size + 0.1:
+                elif uncut_v and app_h > pc.height[2] * k_size + 0.1:
                     reason = "size_far"
-                elif (cfg.box_height_check and not (area.truncated["top"] or area.truncated["bottom"])
-                      and app_h < pc.height[0] / k_size):
+                elif uncut_v and cfg.box_height_check and app_h < pc.height[0] / k_size:
                     reason = "corner_short"  # the box, at this island's range, is lower than any of its class
             leg_like = pc.legged and isl.physical_extent <= pc.leg_size_max
             cut = area.truncated["left"] or area.truncated["right"]  # its solid centre is unknown

@@ -373,11 +373,10 @@ def explain_misses(
             same = [o for o in tracked if o.label == t.label and o.id not in shown_ids and (
                 float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])) <= match_radius_m
                 or (poly is not None and poly.covers(Point(o.pose.x, o.pose.y))))]
-            matched_ids = {int(r["object_id"]) for r in truth_rows if r.get("matched") and r.get("object_id") is not None}
             # an object that stands for another true object took this one only if it covers it: a true chair
             # pushed under a missing table's top stands beside it, not for it
-            merged = [o for o in on_it if (o.label != t.label and o.id not in matched_ids) or (o.id in matched_ids and o.id in covers)]
-            astray = [o for o in tracked if o.id in shown_ids and o.label == t.label and o.id not in matched_ids
+            merged = [o for o in on_it if (o.id in covers if o.id in stands_for else o.label != t.label)]
+            astray = [o for o in tracked if o.id in shown_ids and o.label == t.label and o.id not in stands_for
                       and float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1])) <= 2 * match_radius_m]
             def dist(o: TrackedObject, txy: np.ndarray = txy) -> float:
                 return float(np.hypot(o.pose.x - txy[0], o.pose.y - txy[1]))

@@ -143,12 +143,6 @@ def in_frame_boxes(
     return frac, side
 
 
-def in_frame_fractions(
-    corners: FloatArray, heights_m: FloatArray, T_base_frame: Pose2, camera: CameraModel
-) -> FloatArray:
-    """``(N,)`` share of each object's image box inside the image (:func:`in_frame_boxes`)."""
-    return in_frame_boxes(corners, heights_m, T_base_frame, camera)[0]
-
 
 def angular_span(footprint: Footprint, T_frame_scan: Pose2) -> tuple[float, float, float]:
     """The object as the scan's origin sees it: ``(mid, half, r)``, the bearing of the middle of its

@@ -248,6 +248,55 @@ def test_two_boxes_on_the_same_points_are_one_object():
     assert len(_collide([a, c])) == 2
 
 
+def _face_track(track_id: int, points: np.ndarray, box: int, apparent_width: float, check: bool):
+    """A chair track seen from (2.0, -2.0) looking +y through box ``box`` of the frame at 1 s, its box
+    ``apparent_width`` m wide at the object (a whole box: a bisector ray that knows its width)."""
+    cfg = ConsciousnessConfig()
+    cfg.union_width_check = check
+    c = Candidate(box, "chair", 0.9, "lidar_island", points, None, 2.0, ray_origin=np.array([2.0, -2.0]),
+                  ray_dir=np.array([0.0, 1.0]), ray_weight=1.0, apparent_width=apparent_width)
+    t = create_track(track_id, c, 0.0, -1, cfg, None)
+    t.evidence.box_width_cap = cfg.box_width_cap
+    t.saw(1.0, box)
+    return t, cfg
+
+
+@pytest.mark.parametrize("check", [True, False])
+def test_two_chairs_whose_points_mix_are_no_sofa_when_their_boxes_are_chair_wide(check: bool):
+    """Principle 24 (``consciousness.union_width_check``). Two armchair fronts 0.45 m wide, 0.9 m apart, seen
+    side by side through two boxes of one frame, each box 0.5 m wide at them; one track grew over the other's
+    points. Together they fit the chair class's 1.8 m sofa, so the union used to pass as one chair and the two
+    merged; across the line of sight the union spans 1.8 m, wider than either box showed (1.6 × 0.5 m): two
+    chairs, the larger gives the shared points back. The same points seen through boxes 1.8 m wide (a sofa
+    boxed twice) are one object either way."""
+    from shapely.geometry import Polygon
+
+    from app.ocslam.candidate import FrameReport
+    from app.ocslam.collisions import one_instance, resolve_track_collisions, wider_than_boxes
+
+    left = np.array([[x, 0.0] for x in np.linspace(1.1, 1.55, 10)])
+    right = left + np.array([1.35, 0.0])
+    both = np.vstack([left, right])
+
+    def collide(tracks, cfg):
+        rep = FrameReport(1.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon())
+        return resolve_track_collisions(list(tracks), list(tracks), 1.0, cfg, None, rep)
+
+    a, cfg = _face_track(0, both, 0, 0.5, check)
+    b, _ = _face_track(1, right, 1, 0.5, check)
+    assert one_instance(a, b) and wider_than_boxes(a, b, both)
+    assert one_instance(a, b, box_widths=True) is False
+    kept = collide([a, b], cfg)
+    assert len(kept) == (2 if check else 1)
+    if check:
+        grown = next(t for t in kept if t.id == 0)
+        assert grown.evidence.points[:, 0].max() < 2.0  # the left chair's points only
+    a, cfg = _face_track(0, both, 0, 1.8, check)
+    b, _ = _face_track(1, right, 1, 1.8, check)
+    assert not wider_than_boxes(a, b, both)
+    assert len(collide([a, b], cfg)) == 1
+
+
 def test_a_track_grown_over_a_neighbour_gives_the_neighbour_its_points_back():
     """A 'chair' whose evidence holds two chairs' legs (1.2 m apart: no one chair's legs) and a chair on
     the second set of legs, seen in one frame: the larger loses the shared points, both stay."""

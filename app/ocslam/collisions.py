@@ -62,13 +62,16 @@ def strong_points(t: Track) -> FloatArray:
     return ev.points[ev.hits >= max(1.0, 0.1 * float(ev.hits.max()))]
 
 
-def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False, pedestal_fraction: float = 0.0) -> bool:
+def one_instance(
+    a: Track, b: Track, fragment_fits_largest: bool = False, pedestal_fraction: float = 0.0, box_widths: bool = False
+) -> bool:
     """True if two same-class objects' well-seen points together fit one instance of the class (one
     of its typical shapes; for legs seen as legs, the legs of one instance; for an object on a pedestal
     (:func:`~app.ocslam.tracks.pedestal` at ``pedestal_fraction``), that one support). With ``fragment_fits_largest``,
     when either was only seen through border-cut boxes (a fragment), its largest instance is enough (the
-    other's points may overstate its shape). Without points on either side only their footprints can
-    tell: True."""
+    other's points may overstate its shape). With ``box_widths``, the instance must also be no wider than
+    the two objects' boxes show it (:func:`wider_than_boxes`). Without points on either side only their
+    footprints can tell: True."""
     pa, pb = strong_points(a), strong_points(b)
     if len(pa) == 0 or len(pb) == 0:
         return True
@@ -77,12 +80,37 @@ def one_instance(a: Track, b: Track, fragment_fits_largest: bool = False, pedest
     pc = a.prior
     if not fits_instance(pc, float(d[0]), float(d[1]), typical=not (fragment_fits_largest and (a.partial_only or b.partial_only))):
         return False
+    if box_widths and wider_than_boxes(a, b, np.vstack([pa, pb])):
+        return False
     if pc.legged and float(max(d)) > pc.leg_size_max * 1.5 and any(
         pedestal(t.evidence, p, pc, pedestal_fraction) for t, p in ((a, pa), (b, pb))
     ):
         return False  # a pedestal's points are its support alone: the rest is another object's
     legs = pc.legged and all(t.evidence.leg_obs * 2 > t.evidence.observations for t in (a, b))
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
+
+
+def wider_than_boxes(a: Track, b: Track, points: FloatArray) -> bool:
+    """True if ``points`` ``(N, 2)`` (map frame) spread wider across most of the two objects' lines of sight than
+    their boxes showed there: principle 21's cap (``box_width_cap`` × a box's apparent width, and 0.2 m more) for
+    each bisector ray of a box not cut by the image border. The class's shapes reach from a dining chair to a
+    2.2 m sofa, so two chairs' points may fit "one chair"; their boxes, each a chair wide, say otherwise.
+    False when the cap is off or no ray knows its box's width."""
+    k = float(a.evidence.box_width_cap)
+    if k <= 0.0 or len(points) == 0:
+        return False
+    dirs, widths = [], []
+    for ev in (a.evidence, b.evidence):
+        m = (ev.ray_open == 0) & np.isfinite(ev.ray_app) & (ev.ray_app > 0.0)
+        dirs.append(ev.ray_dir[m])
+        widths.append(ev.ray_app[m])
+    w = np.concatenate(widths)
+    if len(w) == 0:
+        return False
+    d = np.vstack(dirs)
+    across = points @ np.stack([-d[:, 1], d[:, 0]])  # (N, R): each point's offset across each ray
+    span = across.max(axis=0) - across.min(axis=0)
+    return bool(np.count_nonzero(span > np.maximum(k * w, w + 0.2)) * 2 > len(w))
 
 
 def shared_gap(cfg: ConsciousnessConfig) -> float:
@@ -327,7 +355,7 @@ def resolve_track_collisions(
                         if a in lost:
                             break
                         continue
-                    if not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction)):
+                    if not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own
                         loser, other_pts = (a, shared[1]) if fa.area >= fb.area else (b, shared[0])

@@ -505,6 +505,13 @@ class ConsciousnessConfig:
         "beside a chair that the class's sofa-sized shapes would otherwise take in (0: off, the class's largest size)",
         live=True,
     )
+    union_width_check: bool = param(
+        True,
+        help="improved: two objects of one class seen side by side through two boxes of one frame, whose LIDAR points "
+        "mix, are one object only if together they are no wider across most of their lines of sight than their boxes "
+        "showed (box_width_cap): two dining chairs' points fit the chair class's sofa, their boxes do not",
+        live=True,
+    )
     hidden_behind_own_face: bool = param(
         True,
         help="improved, footprints: the part of an object its points do not show lies behind its own face, not behind "

@@ -339,10 +339,12 @@ def explain_misses(
     for k, r in enumerate(truth_rows):
         if r.get("matched") and r.get("object_id") is not None:
             stands_for[int(r["object_id"])] = k
+    truth_polys = [footprint_polygon(t.footprint) for t in truth]
+    shown = [(o, footprint_polygon(o.footprint) if o.footprint is not None else None) for o in tracked if o.id in shown_ids]
     for j, (t, row) in enumerate(zip(truth, truth_rows)):
         if row.get("matched"):
             continue
-        poly = footprint_polygon(t.footprint)
+        poly = truth_polys[j]
         txy = np.array([t.pose.x, t.pose.y])
         cause, detail = "lost", ""
         if log is not None and log.in_view[j] == 0:
@@ -353,21 +355,17 @@ def explain_misses(
             cause, detail = "no_lidar_support", f"detected in {int(log.detected[j])} frames"
         else:
             on_it, covers = [], set()
-            for o in tracked:
-                if o.id not in shown_ids:
-                    continue
-                pt = Point(o.pose.x, o.pose.y)
-                near = poly is not None and poly.distance(pt) <= touch_m
-                ofp = footprint_polygon(o.footprint) if o.footprint is not None else None
+            for o, ofp in shown:
+                near = poly is not None and poly.distance(Point(o.pose.x, o.pose.y)) <= touch_m
                 if ofp is not None and poly is not None and poly.area > 0:
                     over = ofp.intersection(poly).area
-                    own_k = stands_for.get(o.id)
-                    own = footprint_polygon(truth[own_k].footprint) if own_k is not None else None
-                    # an object standing for another true object covers this one beyond what that object does
-                    # (a table's true top covers the chair pushed under it: no merge)
-                    beyond = over - (own.intersection(poly).area if own is not None else 0.0)
-                    if over >= 0.3 * poly.area and beyond >= 0.15 * poly.area:
-                        covers.add(o.id)
+                    if over >= 0.3 * poly.area:
+                        # an object standing for another true object covers this one beyond what that object
+                        # does (a table's true top covers the chair pushed under it: no merge)
+                        own_k = stands_for.get(o.id)
+                        own = truth_polys[own_k] if own_k is not None else None
+                        if over - (own.intersection(poly).area if own is not None else 0.0) >= 0.15 * poly.area:
+                            covers.add(o.id)
                 if near or o.id in covers:
                     on_it.append(o)
             same = [o for o in tracked if o.label == t.label and o.id not in shown_ids and (

@@ -143,7 +143,6 @@ def in_frame_boxes(
     return frac, side
 
 
-
 def angular_span(footprint: Footprint, T_frame_scan: Pose2) -> tuple[float, float, float]:
     """The object as the scan's origin sees it: ``(mid, half, r)``, the bearing of the middle of its
     footprint's angular span, half that span (rad, about the scan origin) and its nearest distance (m;

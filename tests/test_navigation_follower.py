@@ -282,3 +282,24 @@ def test_a_route_that_makes_no_progress_restarts_at_its_last_waypoint() -> None:
     moving = RouteFollower(ROBOT, route, stall_timeout_s=6.0)
     poses, _, _ = run(moving, Pose2(0.0, 0.0, 0.0), seconds=20.0, route=True)
     assert moving.stalls == 0
+
+
+CROSSING_LOOKS = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 0.0], [0.3, -0.55], [0.55, -0.16], [1.05, 0.18], [2.15, -0.45]])
+#: corridor_offices' tour: a look that leaves from a waypoint and comes back 2 cm from it
+RETURNING_LOOK = np.array([[5.68, 0.48], [5.88, 0.72], [5.82, 1.18], [5.62, 1.33], [4.23, 1.52], [4.35, 2.12],
+                           [5.82, 1.18], [5.88, 0.72], [5.68, 0.48], [0.02, 0.03]])
+
+
+@pytest.mark.parametrize(("route", "wobble"), [(CROSSING_LOOKS, 0.0), (CROSSING_LOOKS, 0.004), (CROSSING_LOOKS, -0.004),
+                                               (RETURNING_LOOK, 0.0), (RETURNING_LOOK, 0.004)])
+def test_a_route_whose_later_legs_pass_near_its_waypoints_visits_every_one(route: np.ndarray, wobble: float) -> None:
+    """A tour planner's looks: legs that cross the way home, or come back a few centimetres from the waypoint they
+    left from. Where a later leg passes that near, the robot is still on the leg it was following (within the
+    follower's ``progress_tie_m``); pure pursuit a few centimetres off its leg must not jump to the later one and skip
+    the waypoints in between (with a tie of 1 µm it skipped corridor_offices' look, 1.15 m away)."""
+    rf = RouteFollower(ROBOT, route)
+    poses, _, _ = run(rf, Pose2(route[0, 0], route[0, 1] + wobble, 0.0), seconds=120.0, route=True)
+    assert rf.done and rf.skipped == []
+    xy = np.array([[p.x, p.y] for p in poses])
+    passed = np.hypot(xy[:, None, 0] - route[None, :, 0], xy[:, None, 1] - route[None, :, 1]).min(axis=0)
+    assert (passed <= rf.waypoint_tolerance_m + 0.05).all(), passed

@@ -129,6 +129,7 @@ class PathFollower:
         min_linear_mps: float = 0.03,
         min_angular_rps: float = 0.3,
         heading_gain: float = 2.5,
+        progress_tie_m: float = 0.1,
     ) -> None:
         if lookahead_m <= 0 or goal_tolerance_m <= 0:
             raise ValueError("lookahead_m and goal_tolerance_m must be > 0")
@@ -156,6 +157,7 @@ class PathFollower:
         self.min_linear_mps = float(min(min_linear_mps, self.max_linear_mps))
         self.min_angular_rps = float(min(min_angular_rps, self.max_angular_rps))
         self.heading_gain = float(heading_gain)
+        self.progress_tie_m = float(max(0.0, progress_tie_m))
         self.path: NDArray[np.float64] | None = None
         self.status: str = IDLE
         self.progress_index = 0
@@ -212,9 +214,11 @@ class PathFollower:
         q = aa + t[:, None] * d
         dist = np.linalg.norm(q - p, axis=1)
         s_all = self._cum[k0:k1] + t * np.sqrt(L2)
-        # where two segments are equally near (a path that retraces itself: the way back of an out-and-back route
-        # passes under the robot on its way out), the robot is on the one nearest its last progress
-        tied = np.flatnonzero(dist <= dist.min() + 1e-6)
+        # where segments are about as near (within ``progress_tie_m``: a path that retraces or crosses itself — the way
+        # back of an out-and-back route passes under the robot on its way out, a look's way back passes a few
+        # centimetres from the waypoint the look left from), the robot is on the one nearest its last progress: a
+        # pursuit a few centimetres off its leg must not jump to a later leg and skip the waypoints between
+        tied = np.flatnonzero(dist <= dist.min() + self.progress_tie_m + 1e-9)
         i = int(tied[np.argmin(np.abs(s_all[tied] - self._last_s))])
         k = k0 + i
         return k, float(s_all[i]), float(dist[i])

@@ -40,8 +40,8 @@ def test_the_zoo_has_16_worlds_split_in_two_documented_halves():
     dev, test = set(split["dev"]), set(split["test"])
     assert not dev & test
     assert dev | test == names
-    # one dev world per kind, and a second one for each kind whose test world failed (README's rule)
-    assert len(test) <= len(dev) <= 2 * len(test)
+    # one dev world per kind, and more for each kind whose test world failed (README's rule): never fewer than test
+    assert len(test) <= len(dev)
     readme = (ZOO_DIR / "README.md").read_text(encoding="utf-8")
     rows = [line for line in readme.splitlines() if line.startswith("| ") and "`" in line]
     for line in rows:  # a table row: | kind | dev world | test world |

@@ -11,6 +11,7 @@ model's score calibration (:func:`replay_config`), and each world once per detec
     python scripts/profile_traces.py --profile 30          # + cProfile, top 30 functions by own time
     python scripts/profile_traces.py --set consciousness.island_threshold_m=0.2
     python scripts/profile_traces.py --detector oracle --misses   # the oracle recordings, each miss and FP (dev only)
+    python scripts/profile_traces.py --suite zoo-test --causes    # the suite's misses counted by cause (no per-object rows)
     python scripts/profile_traces.py --model unrecorded          # YOLO recordings of the model before 2026-12-03 15:00
 """
 
@@ -114,10 +115,10 @@ def model_matches(trace: Path, model: str, current_sha: str | None = None) -> bo
     return sha is not None and str(sha).startswith(model)
 
 
-def suite_traces(suite: str, detector: str = "yolo", model: str = "current") -> list[Path]:
-    """The cached traces (``runs/sweep-cache/<world>-<key>/trace-*.pkl``) of a zoo half, or all of them,
+def suite_traces(suite: str, detector: str = "yolo", model: str = "current", cache: str = "runs/sweep-cache") -> list[Path]:
+    """The cached traces (``<cache>/<world>-<key>/trace-*.pkl``) of a zoo half, or all of them,
     recorded with ``detector`` (``any``: every recording) and, for YOLO, ``model`` (:func:`model_matches`)."""
-    files = sorted(Path("runs/sweep-cache").glob("*/trace-*.pkl"))
+    files = sorted(Path(cache).glob("*/trace-*.pkl"))
     if detector != "any":
         files = [f for f in files if recording_detector(f) == detector]
     current = None
@@ -172,16 +173,21 @@ def main() -> int:
                     help="YOLO recordings made with the app's current model (default, by content), before the model "
                          "was written down, any, or the model whose sha256 starts so")
     ap.add_argument("--misses", action="store_true", help="list each world's misses and false positives")
+    ap.add_argument("--cache", default="runs/sweep-cache", metavar="DIR",
+                    help="the sweep cache the suite's traces are read from (default runs/sweep-cache)")
+    ap.add_argument("--causes", action="store_true",
+                    help="count the suite's false negatives by cause and false positives by kind (a table, no per-object rows)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="print the top N functions (own time)")
     a = ap.parse_args()
-    files = [Path(p) for p in a.traces] or suite_traces(a.suite, a.detector, a.model)
+    files = [Path(p) for p in a.traces] or suite_traces(a.suite, a.detector, a.model, a.cache)
     if not files:
         print("no traces: run `ocslam sweep assets/sweeps/six-constants.yaml --trials 1` first", file=sys.stderr)
         return 2
     prof = cProfile.Profile() if a.profile else None
     total_s = total_frames = 0.0
     f1s = []
+    causes: dict[str, int] = {}
     for f in files:
         with open(f, "rb") as fh:
             tr = pickle.load(fh)
@@ -202,8 +208,23 @@ def main() -> int:
               f"{len(objs):3d} objects {fingerprint(objs)} F1 {ev.f1:.3f}")
         if a.misses:
             print_misses(objs, tr.truth, ev, cfg.consciousness.presence_threshold)
+        elif a.causes:
+            from app.ocslam.evaluation import explain_misses
+
+            explain_misses(ev, tr.truth, objs, None, cfg.consciousness.presence_threshold)
+        if a.causes:
+            here: dict[str, int] = {}
+            for r in ev.rows:
+                if r.get("cause") not in (None, "tp"):
+                    key = f"{'FP' if r.get('kind') == 'false_positive' else 'FN'} {r.get('cause')}"
+                    here[key] = here.get(key, 0) + 1
+                    causes[key] = causes.get(key, 0) + 1
+            if here:
+                print("    " + ", ".join(f"{k} {v}" for k, v in sorted(here.items())))
     print(f"{'total':28s} {int(total_frames):5d} frames {total_s:7.2f} CPU s {1e3 * total_s / max(total_frames, 1):6.2f} ms/frame "
           f"mean F1 {sum(f1s) / len(f1s):.4f}")
+    if a.causes:
+        print("causes: " + ", ".join(f"{k} {v}" for k, v in sorted(causes.items())))
     if prof:
         pstats.Stats(prof).sort_stats("tottime").print_stats(a.profile)
     return 0

@@ -145,3 +145,35 @@ def test_a_round_table_with_stools_pushed_in_seen_from_its_open_side():
         errors[sigma] = math.hypot(tables[0].pose.x - 3.0, tables[0].pose.y)
     assert errors[ConsciousnessConfig().ray_centre_sigma_m] < 0.1
     assert errors[0.0] > errors[ConsciousnessConfig().ray_centre_sigma_m] + 0.1
+
+
+def test_rays_crossing_in_front_of_the_seen_surface_do_not_place_the_centre():
+    """An armchair at the back of a bay (one_side_bays): its front face is seen square on from the hall, then from
+    45° into the bay, where the stub hides part of it and the boxes' bisectors pass off its centre. The rays cross
+    0.1 m in front of the face, on the cameras' side of what the LIDAR saw: no centre of this object. A stray point
+    behind (once hit) would otherwise let the crossing fix the centre there."""
+    from app.ocslam.ray_centre import in_front_of_surface
+
+    pc = prior("chair")
+
+    def armchair(behind_surface: bool) -> ObjectEvidence:
+        ev = ObjectEvidence()
+        face = np.stack([np.linspace(0.9, 2.0, 23), np.full(23, 1.84)], axis=1)
+        for _ in range(10):
+            ev.add_points(face)
+        ev.add_points(np.array([[0.9, 2.74]]))  # a stray return, once
+        ev.ray_centre_sigma = 0.05
+        ev.ray_centre_behind_surface = behind_surface
+        crossing = np.array([1.25, 1.74])
+        _rays_at(ev, crossing, np.array([[0.4 + 0.03 * k, -0.2 + 0.1 * k] for k in range(6)]), 1.05)
+        _rays_at(ev, crossing, np.array([[0.42 + 0.01 * k, 1.11 + 0.005 * k] for k in range(4)]), 0.5)
+        return ev
+
+    ev = armchair(True)
+    use = ev.ray_weight > 0
+    assert in_front_of_surface(ev.ray_origin[use], ev.ray_dir[use], np.array([1.25, 1.74]), ev.points)
+    assert not in_front_of_surface(ev.ray_origin[use], ev.ray_dir[use], np.array([1.45, 2.3]), ev.points)
+    with_rule, without = estimate_footprint(armchair(True), pc), estimate_footprint(armchair(False), pc)
+    assert with_rule is not None and without is not None
+    assert without.center[1] < 1.84  # the crossing: in front of its own face
+    assert with_rule.center[1] > 1.84 + 0.2  # behind the face, by about half the armchair's depth

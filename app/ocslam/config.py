@@ -435,6 +435,13 @@ class ConsciousnessConfig:
         "a box beside a shelf; 0: off)",
         live=True,
     )
+    ray_centre_behind_surface: bool = param(
+        True,
+        help="improved: the bisector rays' crossing fixes an object's centre only if it lies behind the surface the "
+        "LIDAR saw of it along most of those rays, not on the camera's side of it (boxes of a part of an armchair "
+        "half hidden in its bay cross in front of it)",
+        live=True,
+    )
     range_contest_slack: float = param(
         0.1, min=0.0, max=2.0, step=0.01,
         help="improved, with point ownership: a point inside several boxes' wedges is lost by a box whose bottom-edge "

@@ -387,10 +387,13 @@ class Consciousness:
                 touched.append(t)
         # negative evidence: points of each object seen now outside the box that saw it (a neighbour's)
         ratio, ray_sigma, width_cap = float(cfg.outside_ratio), float(cfg.ray_centre_sigma_m), float(cfg.box_width_cap)
+        behind = bool(cfg.ray_centre_behind_surface)
         for cand, t in seen_through:
             ev = t.evidence
-            changed = ev.outside_ratio != ratio or ev.ray_centre_sigma != ray_sigma or ev.box_width_cap != width_cap
+            changed = (ev.outside_ratio != ratio or ev.ray_centre_sigma != ray_sigma or ev.box_width_cap != width_cap
+                       or ev.ray_centre_behind_surface != behind)
             ev.outside_ratio, ev.ray_centre_sigma, ev.box_width_cap = ratio, ray_sigma, width_cap
+            ev.ray_centre_behind_surface = behind
             if ratio > 0.0 and ev.has_points:
                 changed |= ev.mark_outside(seen_outside(ev.points, ev.hits, T_map_scan, areas[cand.area_index], cam, ranges,
                                                         float(scan.angle_min), float(scan.angle_increment), max_r))

@@ -81,6 +81,8 @@ class ObjectEvidence:
         #: ``consciousness.ray_centre_sigma_m`` (0: off): where the bisector rays fix the centre this well,
         #: voxels farther from it than the object can reach do not shape it (:func:`app.ocslam.ray_centre.ray_centre`)
         self.ray_centre_sigma = 0.0
+        #: ``consciousness.ray_centre_behind_surface``: a crossing on the viewers' side of the points fixes nothing
+        self.ray_centre_behind_surface = True
         #: ``consciousness.box_width_cap`` (0: off): across the line of sight the object spans at most this
         #: many times its boxes' apparent width (:func:`app.ocslam.footprint_estimate.estimate_footprint`)
         self.box_width_cap = 0.0

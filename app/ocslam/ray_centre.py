@@ -104,4 +104,32 @@ def ray_consistent(ev: ObjectEvidence, pts: FloatArray) -> tuple[NDArray[np.bool
     reach = 0.5 * float(np.percentile(ev.ray_app[use], 75.0)) * 1.15 + 2.0 * sigma + 0.05
     dx, dy = pts[:, 0] - c[0], pts[:, 1] - c[1]
     keep = dx * dx + dy * dy <= reach * reach
-    return (None, None) if keep.all() else (keep, c)
+    if keep.all():
+        return None, None
+    if ev.ray_centre_behind_surface and in_front_of_surface(ev.ray_origin[use], ev.ray_dir[use], c, pts):
+        return None, None  # the rays cross on the viewers' side of what the LIDAR saw: boxes of a part of it
+    return keep, c
+
+
+#: how near a ray a point must lie to be where that ray meets the object's surface (m)
+ON_RAY_M = 0.1
+
+
+def in_front_of_surface(origins: FloatArray, dirs: FloatArray, c: FloatArray, pts: FloatArray) -> bool:
+    """True when ``c`` ``(2,)`` lies nearer the cameras than the seen surface along most rays.
+
+    ``origins``/``dirs``: ``(R, 2)`` bisector rays (unit directions); ``pts``: ``(N, 2)`` the object's points. Along
+    each ray that meets points (within :data:`ON_RAY_M` of it, ahead of the camera), the surface is the nearest of
+    them; an object's centre lies behind its own surface, so a crossing in front of it on more than half of those
+    rays is no centre of this object (the boxes saw a part of it, or something else)."""
+    v = pts[None, :, :] - origins[:, None, :]  # (R, N, 2)
+    along = v[..., 0] * dirs[:, None, 0] + v[..., 1] * dirs[:, None, 1]
+    lateral = np.abs(v[..., 0] * dirs[:, None, 1] - v[..., 1] * dirs[:, None, 0])
+    on = (lateral <= ON_RAY_M) & (along > 0.0)
+    meets = on.any(axis=1)
+    if not meets.any():
+        return False
+    surface = np.where(on, along, np.inf).min(axis=1)
+    c_along = np.einsum("rk,rk->r", c[None, :] - origins, dirs)
+    front = (c_along < surface) & meets
+    return bool(np.count_nonzero(front) > 0.5 * np.count_nonzero(meets))

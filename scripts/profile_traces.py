@@ -25,6 +25,7 @@ import pickle
 import pstats
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -144,11 +145,9 @@ def suite_traces(suite: str, detector: str = "yolo", model: str = "current", cac
     return [f for f in files if f.parent.name.rsplit("-", 1)[0] in names]
 
 
-def print_misses(objs, truth, ev, threshold: float) -> None:
-    """Each false negative (with its map-side cause) and each false positive of one world."""
-    from app.ocslam.evaluation import explain_misses
-
-    explain_misses(ev, truth, objs, None, threshold)
+def print_misses(ev) -> None:
+    """Each false negative (with its map-side cause, :func:`~app.ocslam.evaluation.explain_misses`) and each false
+    positive of one world."""
     for r in ev.rows:
         if r.get("cause") in (None, "tp"):
             continue
@@ -160,7 +159,7 @@ def print_misses(objs, truth, ev, threshold: float) -> None:
 
 
 def main() -> int:
-    from app.ocslam.evaluation import evaluate_objects
+    from app.ocslam.evaluation import evaluate_objects, explain_misses
     from app.sweep.trace import FuseInput, replay_trace
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -187,7 +186,7 @@ def main() -> int:
     prof = cProfile.Profile() if a.profile else None
     total_s = total_frames = 0.0
     f1s = []
-    causes: dict[str, int] = {}
+    causes: Counter[str] = Counter()
     for f in files:
         with open(f, "rb") as fh:
             tr = pickle.load(fh)
@@ -206,19 +205,14 @@ def main() -> int:
         f1s.append(ev.f1)
         print(f"{tr.name:28s} {frames:5d} frames {dt:7.2f} CPU s {1e3 * dt / max(frames, 1):6.2f} ms/frame "
               f"{len(objs):3d} objects {fingerprint(objs)} F1 {ev.f1:.3f}")
-        if a.misses:
-            print_misses(objs, tr.truth, ev, cfg.consciousness.presence_threshold)
-        elif a.causes:
-            from app.ocslam.evaluation import explain_misses
-
+        if a.misses or a.causes:
             explain_misses(ev, tr.truth, objs, None, cfg.consciousness.presence_threshold)
+        if a.misses:
+            print_misses(ev)
         if a.causes:
-            here: dict[str, int] = {}
-            for r in ev.rows:
-                if r.get("cause") not in (None, "tp"):
-                    key = f"{'FP' if r.get('kind') == 'false_positive' else 'FN'} {r.get('cause')}"
-                    here[key] = here.get(key, 0) + 1
-                    causes[key] = causes.get(key, 0) + 1
+            here = Counter(f"{'FP' if r.get('kind') == 'false_positive' else 'FN'} {r.get('cause')}"
+                           for r in ev.rows if r.get("cause") not in (None, "tp"))
+            causes.update(here)
             if here:
                 print("    " + ", ".join(f"{k} {v}" for k, v in sorted(here.items())))
     print(f"{'total':28s} {int(total_frames):5d} frames {total_s:7.2f} CPU s {1e3 * total_s / max(total_frames, 1):6.2f} ms/frame "

@@ -26,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 
 def missed_waypoints(trace_path: Path, world_file: Path, over_m: float) -> tuple[int, list[tuple[int, float]]]:
     """``(waypoints, [(index, distance m)])``: the tour's waypoints the recording's path passed farther than ``over_m``."""
+    from app.ocslam.se2 import Pose2
     from app.sweep.trace import FuseInput
     from app.world.format import load_world
 
@@ -34,9 +35,8 @@ def missed_waypoints(trace_path: Path, world_file: Path, over_m: float) -> tuple
         tr = pickle.load(fh)
     path = np.array([[e.T_map_base.x, e.T_map_base.y] for e in tr.events if isinstance(e, FuseInput)]).reshape(-1, 2)
     s = world.start
-    c, sn = math.cos(s.yaw), math.sin(s.yaw)
-    rel = np.asarray(world.routes["tour"], dtype=np.float64) - (s.x, s.y)
-    tour = np.c_[c * rel[:, 0] + sn * rel[:, 1], -sn * rel[:, 0] + c * rel[:, 1]]  # the start-relative map frame
+    T_map_world = Pose2(s.x, s.y, s.yaw).inverse()  # the trace's map frame starts at the world's start
+    tour = T_map_world.transform_points(np.asarray(world.routes["tour"], dtype=np.float64))
     if not len(path):
         return len(tour), [(i, math.inf) for i in range(len(tour))]
     d = np.hypot(tour[:, None, 0] - path[None, :, 0], tour[:, None, 1] - path[None, :, 1]).min(axis=1)

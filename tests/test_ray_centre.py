@@ -19,7 +19,7 @@ from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint_estimate import estimate_footprint
-from app.ocslam.ray_centre import ray_centre, ray_normal_equations
+from app.ocslam.ray_centre import in_front_of_surface, ray_centre, ray_normal_equations
 
 
 def _rays_at(ev: ObjectEvidence, target: np.ndarray, origins: np.ndarray, app: float, jitter: float = 0.0) -> None:
@@ -152,8 +152,6 @@ def test_rays_crossing_in_front_of_the_seen_surface_do_not_place_the_centre():
     45° into the bay, where the stub hides part of it and the boxes' bisectors pass off its centre. The rays cross
     0.1 m in front of the face, on the cameras' side of what the LIDAR saw: no centre of this object. A stray point
     behind (once hit) would otherwise let the crossing fix the centre there."""
-    from app.ocslam.ray_centre import in_front_of_surface
-
     pc = prior("chair")
 
     def armchair(behind_surface: bool) -> ObjectEvidence:

@@ -629,6 +629,33 @@ def test_objects_seen_from_two_keyframes_follow_each_part():
     assert 0.0 < c.objects[0].pose.x - x0 <= 0.2 + 1e-9
 
 
+def test_an_object_moved_by_a_correction_keeps_its_free_space_check_at_the_next_frame():
+    """A shelf's face with the space behind it seen empty stays on its face (it is not completed to its
+    depth into free space). A loop closure moves its keyframe; the grid at hand was built before it, so the
+    object is re-estimated from its evidence alone, and again with the next frame's grid (built on the
+    corrected poses): it is back on its face although no box has seen it since."""
+    from app.ocslam.messages import OccupancyGrid
+
+    def grid_behind(dx: float) -> OccupancyGrid:
+        g = OccupancyGrid(0.05, Pose2(-1.0 + dx, -3.0, 0.0), np.full((120, 120), -1, dtype=np.int8))
+        centers = g.cell_centers().reshape(-1, 2)
+        behind = (centers[:, 0] > 2.55 + dx) & (centers[:, 0] < 3.5 + dx) & (np.abs(centers[:, 1]) < 0.6)
+        g.data = np.where(behind, 0, -1).astype(np.int8).reshape(120, 120)
+        return g
+
+    panel = Box(2.5, 0.0, 0.02, 1.0, 0.0, 0.0, 1.1)
+    c = make()
+    drive(c, [panel], [("shelf", panel)], line(6), grid=grid_behind(0.0), keyframe=(3, Pose2()))
+    (o,) = by_label(c.visible_objects(), "shelf")
+    assert o.pose.x == pytest.approx(2.5, abs=0.03)  # kept on the face
+    c.apply_correction(lambda k: {3: Pose2(0.1, 0.0, 0.0)}[k])
+    T = Pose2(0.1 + 0.04 * 5, 0.0, 0.0)
+    nothing = raycast([], T, CAM)
+    c.update(detections([], CAM), nothing, T, stamp=2.0, grid=grid_behind(0.1), keyframe=(3, Pose2(0.1, 0.0, 0.0)))
+    (o,) = by_label(c.objects, "shelf")
+    assert o.pose.x == pytest.approx(2.6, abs=0.03)  # on its moved face, not 0.2 m behind it
+
+
 # -- robustness ---------------------------------------------------------------------------------------------
 
 

@@ -109,6 +109,9 @@ class Consciousness:
         self._stamp = -math.inf
         self._known_free: Callable[[FloatArray], NDArray[np.bool_]] | None = None
         self._beams: tuple[tuple[float, float, int], FloatArray, FloatArray, FloatArray] | None = None
+        #: tracks moved by a correction since the last frame: re-estimated again at the next frame, with
+        #: the occupancy grid built on the corrected poses (the free-space and wall checks need it)
+        self._moved: list[Track] = []
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -141,6 +144,7 @@ class Consciousness:
         self._last_pose = None
         self._last_stamp = None
         self.last_report = None
+        self._moved = []
 
     def update(
         self,
@@ -293,6 +297,12 @@ class Consciousness:
         self._last_pose = T_map_base
         self._stamp = stamp
         self._known_free = grid_free_fn(grid, cfg.hidden_behind_own_face) if cfg.corner_check else None
+        if self._moved:
+            if self._known_free is not None:
+                for moved in self._moved:
+                    if moved in self._tracks:
+                        moved.refresh(self._known_free)
+            self._moved = []
         dt = 0.0 if self._last_stamp is None else float(np.clip(stamp - self._last_stamp, 0.0, 1.0))
         self._last_stamp = stamp
 
@@ -421,7 +431,11 @@ class Consciousness:
 
     def _apply_deltas(self, deltas: dict[int, Pose2]) -> None:
         """Move every track's evidence with its keyframes; only the tracks with evidence from a moved
-        keyframe are re-estimated (the others keep their footprint, and its free-space check)."""
+        keyframe are re-estimated (the others keep their footprint, and its free-space check). The
+        occupancy grid at hand was built on the poses before the correction, so the moved tracks are
+        re-estimated from their evidence alone now and again with the next frame's grid."""
         for t in self._tracks:
             if t.evidence.transform(deltas):
                 t.refresh()
+                if t not in self._moved:
+                    self._moved.append(t)

@@ -404,6 +404,36 @@ def test_corner_see_through_in_the_scan():
     assert sum(r.rejected.get("corner_see_through", 0) for r in reps) > 0
 
 
+@pytest.mark.parametrize("behind_surface", [True, False])
+def test_an_armchair_seen_corner_first_is_solid_behind_its_faces(behind_surface: bool):
+    """An armchair turned 45°, seen corner first, in a mapped room: the grid knows free space all round it and its
+    faces occupied. Just behind its front corner, across its box's solid centre, most of that arc lies beside
+    the corner (free); just behind its faces it is solid. The free-space test follows the island's surface, so
+    the armchair is an object; probing behind its front point alone rejects it as a corner."""
+    from shapely import contains_xy
+    from shapely.geometry import Polygon
+
+    from app.ocslam.messages import OccupancyGrid
+
+    arm = Box(2.8, 0.0, 1.0, 1.0, math.pi / 4, 0.0, 0.9)
+    grid = OccupancyGrid(0.05, Pose2(-2.0, -4.0, 0.0), np.zeros((160, 160), dtype=np.int8))
+    centers = grid.cell_centers().reshape(-1, 2)
+    poly = Polygon(arm.corners2d())
+    inside = contains_xy(poly, centers[:, 0], centers[:, 1])
+    face = contains_xy(poly.exterior.buffer(0.03), centers[:, 0], centers[:, 1])
+    grid.data = np.where(face, 100, np.where(inside, -1, 0)).astype(np.int8).reshape(160, 160)
+    c = make(free_space_behind_surface=behind_surface)
+    reps = drive(c, [arm], [("chair", arm)], line(7), grid=grid)
+    rejected = sum(r.rejected.get("corner_free_space", 0) for r in reps)
+    chairs = by_label(c.visible_objects(), "chair")
+    if behind_surface:
+        assert rejected == 0
+        (o,) = chairs
+        assert math.hypot(o.pose.x - 2.8, o.pose.y) < 0.3
+    else:
+        assert rejected > 0 and chairs == []
+
+
 def test_corner_rejected_by_free_space_in_the_grid():
     """Only the occupancy grid knows: a screen right behind the sofa corner (in the scan, not in the
     map) hides the space behind it; the grid has seen that space free."""

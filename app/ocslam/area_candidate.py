@@ -160,7 +160,7 @@ def area_candidate(
                     reason = "corner_see_through"
                 elif _narrower_than_class(b, pc, r_front, beam_b, beam_r):
                     reason = "corner_narrow"
-                elif _grid_free(area, pc, r_front, T_map_scan, grid):
+                elif _grid_free(area, pc, r_front, T_map_scan, grid, (b, r) if cfg.free_space_behind_surface else None):
                     reason = "corner_free_space"
         if reason is not None:
             isl.reason = reason
@@ -330,14 +330,32 @@ def _narrower_than_class(b: FloatArray, pc: ClassPrior, r_front: float, beam_b: 
 
 
 def _grid_free(
-    area: BoundingArea, pc: ClassPrior, r_front: float, T_map_scan: Pose2, grid: OccupancyGrid | None
+    area: BoundingArea,
+    pc: ClassPrior,
+    r_front: float,
+    T_map_scan: Pose2,
+    grid: OccupancyGrid | None,
+    surface: tuple[FloatArray, FloatArray] | None = None,
 ) -> bool:
-    """True if the occupancy grid shows known free space just behind ``r_front`` across the box's solid centre."""
+    """True if the occupancy grid shows known free space just behind the island across the box's solid centre.
+
+    ``surface``: the island's ``(N,)`` bearings and ranges about the apex; along the bearings it covers, "just
+    behind" follows its surface (an armchair seen corner first is solid behind both its faces, not beside its
+    front corner); elsewhere, and without it, just behind its front range ``r_front``."""
     if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
         return False
     half = pc.solid_fraction * area.half_angle
     b = area.bearing_center + linspace(-half, half, 9)
-    r = r_front + max(grid.resolution, 0.05)
+    r = np.full(9, r_front)
+    if surface is not None and len(surface[0]) >= 2:
+        sb, sr = surface
+        rel = (sb - area.bearing_center + np.pi) % (2.0 * np.pi) - np.pi
+        order = np.argsort(rel)
+        rel, sr = rel[order], sr[order]
+        off = b - area.bearing_center
+        on = (off >= rel[0]) & (off <= rel[-1])
+        r[on] = np.interp(off[on], rel, sr)
+    r = r + max(grid.resolution, 0.05)
     probe = np.empty((9, 2))
     probe[:, 0] = area.apex[0] + r * np.cos(b)
     probe[:, 1] = area.apex[1] + r * np.sin(b)

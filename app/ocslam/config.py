@@ -508,6 +508,12 @@ class ConsciousnessConfig:
         "shared LIDAR point stays with the one that saw it more often (two round tables seen along one line; 0: off)",
         live=True,
     )
+    free_space_behind_surface: bool = param(
+        True,
+        help="improved, corner check: the free-space test (corner_free_space) looks just behind the island's own surface "
+        "along the bearings it covers, not just behind its front point (an armchair seen corner first)",
+        live=True,
+    )
     box_width_cap: float = param(
         1.6, min=0.0, max=5.0, step=0.1,
         help="improved, footprints: across the line of sight an object spans at most this many times the apparent width "

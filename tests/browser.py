@@ -93,7 +93,7 @@ def app_state(app) -> str:
     """One line of the live app's state for a failure message: how far and how fast the loop ran."""
     p = app.pipeline
     return (
-        f"sim t={p.time:.1f} s, real-time factor {app.real_time_factor:.2f}, drive {p.drive_mode}, "
+        f"sim t={p.time:.1f} s, real-time factor {app.real_time_factor:.2f}, drive {p.drive_mode}, nav {p.nav_status!r}, "
         f"cmd ({p.cmd.linear_x:.2f} m/s, {p.cmd.angular_z:.2f} rad/s), teleop presses {app.teleop.presses}, "
         f"clients {len(app.server.get_clients())}, loop error {app.loop_error}"
     )

@@ -88,11 +88,20 @@ def _clearance_ahead(app, half_width: float = 0.15) -> float:
     return float(ahead[:, 0].min()) if len(ahead) else np.inf
 
 
-def _open_direction(app) -> float:
-    """Bearing (rad, base frame) of the longest return: where a short drive is sure to be free."""
+def _open_direction(app, half_width: float = 0.3) -> float:
+    """Bearing (rad, base frame) of the widest open way: the one whose corridor, ``half_width`` to each side (the
+    robot and its planner's clearance), runs free the farthest in the latest scan, where a short drive is sure to
+    be free. (The single longest return may pass through a gap the robot cannot: the planner then finds no path.)"""
     pts = _scan_points_base(app)
-    far = pts[np.argmax(np.hypot(pts[:, 0], pts[:, 1]))]
-    return float(np.arctan2(far[1], far[0]))
+    best, best_free = 0.0, -1.0
+    for bearing in np.deg2rad(np.arange(-180.0, 180.0, 5.0)):
+        c, s = np.cos(bearing), np.sin(bearing)
+        along, across = pts[:, 0] * c + pts[:, 1] * s, -pts[:, 0] * s + pts[:, 1] * c
+        ahead = along[(along > 0.0) & (np.abs(across) < half_width)]
+        free = float(ahead.min()) if len(ahead) else np.inf
+        if free > best_free:
+            best, best_free = float(bearing), free
+    return best
 
 
 def _turn_with_key(app, page, key: str, *, what: str) -> None:

@@ -81,11 +81,18 @@ def _scan_points_base(app) -> np.ndarray:
     return app.pipeline.T_base_scan.transform_points(app.pipeline.last_scan.points())
 
 
+def _clearance_along(pts: np.ndarray, bearing: float, half_width: float) -> float:
+    """Free distance (m) along ``bearing`` (rad, the frame of ``pts`` ``(N, 2)``): the nearest of the points in the
+    corridor ``half_width`` to each side of it, ahead."""
+    c, s = np.cos(bearing), np.sin(bearing)
+    along, across = pts[:, 0] * c + pts[:, 1] * s, -pts[:, 0] * s + pts[:, 1] * c
+    ahead = along[(along > 0.0) & (np.abs(across) < half_width)]
+    return float(ahead.min()) if len(ahead) else np.inf
+
+
 def _clearance_ahead(app, half_width: float = 0.15) -> float:
     """Free distance straight ahead of the robot (m): the nearest return in its swept corridor."""
-    pts = _scan_points_base(app)
-    ahead = pts[(pts[:, 0] > 0.0) & (np.abs(pts[:, 1]) < half_width)]
-    return float(ahead[:, 0].min()) if len(ahead) else np.inf
+    return _clearance_along(_scan_points_base(app), 0.0, half_width)
 
 
 def _open_direction(app, half_width: float = 0.3) -> float:
@@ -93,15 +100,9 @@ def _open_direction(app, half_width: float = 0.3) -> float:
     robot and its planner's clearance), runs free the farthest in the latest scan, where a short drive is sure to
     be free. (The single longest return may pass through a gap the robot cannot: the planner then finds no path.)"""
     pts = _scan_points_base(app)
-    best, best_free = 0.0, -1.0
-    for bearing in np.deg2rad(np.arange(-180.0, 180.0, 5.0)):
-        c, s = np.cos(bearing), np.sin(bearing)
-        along, across = pts[:, 0] * c + pts[:, 1] * s, -pts[:, 0] * s + pts[:, 1] * c
-        ahead = along[(along > 0.0) & (np.abs(across) < half_width)]
-        free = float(ahead.min()) if len(ahead) else np.inf
-        if free > best_free:
-            best, best_free = float(bearing), free
-    return best
+    bearings = np.deg2rad(np.arange(-180.0, 180.0, 5.0))
+    free = [_clearance_along(pts, float(b), half_width) for b in bearings]
+    return float(bearings[int(np.argmax(free))])
 
 
 def _turn_with_key(app, page, key: str, *, what: str) -> None:

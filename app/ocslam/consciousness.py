@@ -111,7 +111,7 @@ class Consciousness:
         self._beams: tuple[tuple[float, float, int], FloatArray, FloatArray, FloatArray] | None = None
         #: tracks moved by a correction since the last frame: re-estimated again at the next frame, with
         #: the occupancy grid built on the corrected poses (the free-space and wall checks need it)
-        self._moved: list[Track] = []
+        self._moved: dict[int, Track] = {}
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -144,7 +144,7 @@ class Consciousness:
         self._last_pose = None
         self._last_stamp = None
         self.last_report = None
-        self._moved = []
+        self._moved = {}
 
     def update(
         self,
@@ -299,10 +299,10 @@ class Consciousness:
         self._known_free = grid_free_fn(grid, cfg.hidden_behind_own_face) if cfg.corner_check else None
         if self._moved:
             if self._known_free is not None:
-                for moved in self._moved:
-                    if moved in self._tracks:
-                        moved.refresh(self._known_free)
-            self._moved = []
+                for track in self._tracks:
+                    if self._moved.get(track.id) is track:
+                        track.refresh(self._known_free)
+            self._moved = {}
         dt = 0.0 if self._last_stamp is None else float(np.clip(stamp - self._last_stamp, 0.0, 1.0))
         self._last_stamp = stamp
 
@@ -437,5 +437,4 @@ class Consciousness:
         for t in self._tracks:
             if t.evidence.transform(deltas):
                 t.refresh()
-                if t not in self._moved:
-                    self._moved.append(t)
+                self._moved[t.id] = t

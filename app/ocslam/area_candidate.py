@@ -153,6 +153,8 @@ def area_candidate(
                     reason = "size_far"
                 elif uncut_v and cfg.box_height_check and app_h < pc.height[0] / k_size:
                     reason = "corner_short"  # the box, at this island's range, is lower than any of its class
+                elif cfg.top_edge_check and not area.truncated["top"] and _top_below_class(y1, r_front, pc, cam, cfg):
+                    reason = "corner_top"  # its top edge, however deep the object, is lower than any of its class
             leg_like = pc.legged and isl.physical_extent <= pc.leg_size_max
             cut = area.truncated["left"] or area.truncated["right"]  # its solid centre is unknown
             if reason is None and pc.solid_fraction > 0.0 and not leg_like and not cut:
@@ -408,6 +410,15 @@ def corner_legs(group: list[int], islands: list[Island], corner_m: float) -> lis
             break
         del group[worst]
     return group
+
+def _top_below_class(y1: float, r_front: float, pc: ClassPrior, cam: CameraModel, cfg: ConsciousnessConfig) -> bool:
+    """True if the box's top row ``y1`` (px, inside the image), seen at the island's front range ``r_front`` plus
+    the class's largest depth (the top may lie at the object's far side: a chair's back), is lower than the
+    class's lowest instance, with ``bottom_margin_px`` of slack on the row. Pinhole, level camera."""
+    rows_above = cam.info.cy - (y1 - float(cfg.bottom_margin_px))
+    z_top = cam.camera_height + rows_above / cam.info.fy * (r_front + pc.width[2])
+    return bool(z_top < pc.height[0])
+
 
 def _ground_plane_center(
     area: BoundingArea,

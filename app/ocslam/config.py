@@ -347,6 +347,12 @@ class ConsciousnessConfig:
         "the class's lowest instance (over size_consistency_tolerance): a stool boxed as a shelf",
         live=True,
     )
+    top_edge_check: bool = param(
+        True,
+        help="improved: an island is not the object of a box whose top edge is in the image and, at the island's range "
+        "plus the class's depth, lies lower than the class's lowest instance (a cabinet or a chair's back boxed as a door)",
+        live=True,
+    )
     size_consistency_tolerance: float = param(
         0.6, min=0.05, max=5.0, step=0.05, help="improved: relative range error allowed by the box-size check", live=True
     )

@@ -411,10 +411,17 @@ def corner_legs(group: list[int], islands: list[Island], corner_m: float) -> lis
         del group[worst]
     return group
 
+
 def _top_below_class(y1: float, r_front: float, pc: ClassPrior, cam: CameraModel, cfg: ConsciousnessConfig) -> bool:
-    """True if the box's top row ``y1`` (px, inside the image), seen at the island's front range ``r_front`` plus
-    the class's largest depth (the top may lie at the object's far side: a chair's back), is lower than the
-    class's lowest instance, with ``bottom_margin_px`` of slack on the row. Pinhole, level camera."""
+    """True if no object of the class can have its image top at row ``y1`` (px, inside the image) with its front at
+    ``r_front`` (m, the island's range from the camera).
+
+    Every point of the object lies at or below the ray through ``y1``: at range ``d`` it is at most
+    ``h_cam + (c_y − y1)/f_y · d`` high. The point at the top row is the object's highest seen from the camera, the
+    nearest part of a flat top above the camera (a door, a table) or a part farther back (a chair's back), but no
+    farther than ``r_front`` plus the largest size of the class's shorter side; if even there the ray (with
+    ``bottom_margin_px`` of slack on the row) stays below the class's lowest instance, the island is not this box's
+    object. Pinhole, level camera."""
     rows_above = cam.info.cy - (y1 - float(cfg.bottom_margin_px))
     z_top = cam.camera_height + rows_above / cam.info.fy * (r_front + pc.width[2])
     return bool(z_top < pc.height[0])

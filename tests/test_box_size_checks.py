@@ -6,31 +6,45 @@ from __future__ import annotations
 from app.ocslam.se2 import Pose2
 
 
-def test_a_box_lower_than_its_class_does_not_take_the_island():
-    """A 0.45 m stool boxed as a shelf (the detector's mistake): at the stool's range the box is 0.45 m high, lower
-    than any shelf (≥ 0.9 m, over the size tolerance), so its island is no shelf's (``corner_short``); without the
-    check the stool's island makes a shelf."""
-    from synthetic_scene import Box, default_camera, detection, detections, raycast
+def _boxed_six_frames(label: str, shape, **switches) -> tuple[list[str], dict[str, int], float]:
+    """Six frames of one box of ``label`` around ``shape`` (the robot creeping towards it) with the consciousness'
+    ``switches`` set: the sources of the final ``label`` objects, the islands' rejection reasons counted, and the
+    boxes' highest top row (px) over the frames' margin of a box cut by the image's top (``edge_margin_px``)."""
+    from synthetic_scene import default_camera, detection, detections, raycast
 
     from app.ocslam.config import ConsciousnessConfig
     from app.ocslam.consciousness import Consciousness
 
     cam = default_camera()
+    cfg = ConsciousnessConfig()
+    for k, v in switches.items():
+        setattr(cfg, k, v)
+    c = Consciousness(cfg, cam)
+    rejected: dict[str, int] = {}
+    top = float("inf")
+    for i in range(6):
+        T = Pose2(0.03 * i, 0.05 * i, 0.0)
+        det = detection(label, shape, T, cam, 0.95)
+        assert det is not None
+        top = min(top, det.y1 / cfg.edge_margin_px)
+        rep = c.update(detections([det], cam), raycast([shape], T, cam), T, stamp=0.2 * i)
+        for k, v in rep.rejected.items():
+            rejected[k] = rejected.get(k, 0) + v
+    return [t.source for t in c._tracks if t.label == label], rejected, top
+
+
+def test_a_box_lower_than_its_class_does_not_take_the_island():
+    """A 0.45 m stool boxed as a shelf (the detector's mistake): at the stool's range the box is 0.45 m high, lower
+    than any shelf (≥ 0.9 m, over the size tolerance), so its island is no shelf's (``corner_short``); without the
+    check the stool's island makes a shelf."""
+    from synthetic_scene import Box
+
     stool = Box(2.0, 0.0, 0.4, 0.4, 0.0, 0.0, 0.45)
     found = {}
     for check in (True, False):
-        cfg = ConsciousnessConfig()
-        cfg.box_height_check = check
-        cfg.top_edge_check = False  # the height check alone
-        c = Consciousness(cfg, cam)
-        rejected: dict[str, int] = {}
-        for i in range(6):
-            T = Pose2(0.03 * i, 0.05 * i, 0.0)
-            rep = c.update(detections([detection("shelf", stool, T, cam, 0.95)], cam), raycast([stool], T, cam), T,
-                           stamp=0.2 * i)
-            for k, v in rep.rejected.items():
-                rejected[k] = rejected.get(k, 0) + v
-        found[check] = ([t.source for t in c._tracks if t.label == "shelf"], rejected.get("corner_short", 0))
+        # the height check alone
+        sources, rejected, _top = _boxed_six_frames("shelf", stool, box_height_check=check, top_edge_check=False)
+        found[check] = (sources, rejected.get("corner_short", 0))
     assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
     assert found[False][1] == 0 and "lidar_island" in found[False][0]
 
@@ -40,27 +54,13 @@ def test_a_box_whose_top_edge_is_lower_than_its_class_does_not_take_the_island()
     even as deep as the deepest door, the box's top edge is 1.4 m above the floor, lower than any door (≥ 1.6 m), so
     its island is no door's (``corner_top``). The box's height alone (1.2 m) passes the height check's tolerance;
     without the top-edge check the cabinet makes a door."""
-    from synthetic_scene import Box, default_camera, detection, detections, raycast
+    from synthetic_scene import Box
 
-    from app.ocslam.config import ConsciousnessConfig
-    from app.ocslam.consciousness import Consciousness
-
-    cam = default_camera()
     cabinet = Box(3.2, 0.0, 0.4, 0.8, 0.0, 0.0, 1.2)
     found = {}
     for check in (True, False):
-        cfg = ConsciousnessConfig()
-        cfg.top_edge_check = check
-        c = Consciousness(cfg, cam)
-        rejected: dict[str, int] = {}
-        for i in range(6):
-            T = Pose2(0.03 * i, 0.05 * i, 0.0)
-            det = detection("door", cabinet, T, cam, 0.95)
-            assert det is not None and det.y1 > 2 * cfg.edge_margin_px  # its top is in the image
-            rep = c.update(detections([det], cam), raycast([cabinet], T, cam), T, stamp=0.2 * i)
-            for k, v in rep.rejected.items():
-                rejected[k] = rejected.get(k, 0) + v
-        found[check] = ([t.source for t in c._tracks if t.label == "door"], rejected.get("corner_top", 0),
-                        rejected.get("corner_short", 0))
+        sources, rejected, top = _boxed_six_frames("door", cabinet, top_edge_check=check)
+        assert top > 2  # its top is in the image, in every frame
+        found[check] = (sources, rejected.get("corner_top", 0), rejected.get("corner_short", 0))
     assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
     assert found[False][1] == 0 and found[False][2] == 0 and "lidar_island" in found[False][0]

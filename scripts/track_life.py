@@ -9,7 +9,7 @@ on it).
 
 Each row: stamp, ``T_map_base``, presence, soft-decision frames, boxed frames, clear misses, footprint centre and
 size (the trace's map frame: start-relative), whether this frame updated it and with which box (its index in the
-frame's boxes), then the frame's boxes ``(class, confidence, x1, x2)`` at the detector threshold.
+frame's boxes), then the frame's boxes ``(class, confidence, x1, y1, x2, y2)`` at the detector threshold.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def main() -> int:
             return
         T, fp = ev.T_map_base, t.footprint
         box = t.boxes.get(ev.stamp)
-        boxes = [(b.label, round(b.confidence, 2), int(b.x1), int(b.x2)) for b in filter_detections(ev.detections, conf).boxes]
+        boxes = [(b.label, round(b.confidence, 2), int(b.x1), int(b.y1), int(b.x2), int(b.y2)) for b in filter_detections(ev.detections, conf).boxes]
         print(f"{ev.stamp:8.2f} T=({T.x:5.2f},{T.y:5.2f},{T.yaw:5.2f}) p={t.presence:.2f} f={t.frames} boxed={t.detections} "
               f"missed={t.misses} c=({fp.center[0]:.2f},{fp.center[1]:.2f}) {fp.size_x:.2f}×{fp.size_y:.2f} "
               f"{'box ' + str(box) if box is not None else '-'} {boxes}")

@@ -162,7 +162,9 @@ def test_a_stool_behind_a_pedestal_table_stops_shaping_it_once_seen_beside_it():
     poses = straight(15, 0.0, 0.0, 0.8, 0.0) + arc(20, 3.0, 0.0, 2.0, math.pi, math.pi / 2 - 0.3)
     errors = {}
     for ratio in (0.0, ConsciousnessConfig().outside_ratio):
-        c = make(outside_ratio=ratio, ray_centre_sigma_m=0.0)  # the outside evidence alone (the rays: test_ray_centre)
+        # the outside evidence alone (the rays: test_ray_centre; the pedestal seen alone on its box's centre line:
+        # test_fusion_scenarios)
+        c = make(outside_ratio=ratio, ray_centre_sigma_m=0.0, central_support=False)
         run(c, [pedestal] + stool, [("table", [pedestal, top])], poses)
         (t,) = found(c, "table")
         errors[ratio] = math.hypot(t.pose.x - 3.0, t.pose.y)

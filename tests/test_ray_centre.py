@@ -138,7 +138,7 @@ def test_a_round_table_with_stools_pushed_in_seen_from_its_open_side():
     poses = arc(30, 3.0, 0.0, 2.0, -math.pi / 2 - 0.6, -math.pi / 2 + 0.6)
     errors = {}
     for sigma in (0.0, ConsciousnessConfig().ray_centre_sigma_m):
-        c = make(ray_centre_sigma_m=sigma)
+        c = make(ray_centre_sigma_m=sigma, central_support=False)  # the rays alone (central_support: test_fusion_scenarios)
         run(c, [pedestal] + stools, [("table", [pedestal, top])], poses)
         tables = found(c, "table")
         assert len(tables) == 1

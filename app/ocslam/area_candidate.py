@@ -188,7 +188,9 @@ def area_candidate(
         costs = [c + w_range * (r - r_min) / max(r_min, 0.3) for (_, c, r) in passing]
         best = passing[int(np.argmin(costs))][0]
         group = [best]
-        if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max:
+        if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max and not (
+            cfg.central_support and pc.pedestal and ray_w > 0.0 and _central_support(islands[best], area, half, pc, cam)
+        ):
             group = _group_legs(best, islands, behind_ok, pc)
             if cfg.point_ownership:
                 group = corner_legs(group, islands, float(cfg.leg_corner_m))
@@ -270,6 +272,17 @@ def _hidden_by_other_box(uv: FloatArray, other_boxes: FloatArray | None, margin_
     u, v = uv[:, 0][:, None], uv[:, 1][:, None]
     inside = (u >= b[:, 0] - margin_px) & (u <= b[:, 2] + margin_px) & (v >= b[:, 1] - margin_px) & (v <= b[:, 3] + margin_px)
     return bool(np.mean(inside.any(axis=1)) > 0.5)
+
+
+def _central_support(best: Island, area: BoundingArea, half: float, pc: ClassPrior, cam: CameraModel) -> bool:
+    """True if ``best`` alone, before any leg joins it, is what :func:`_support` calls a support: one leg-sized island
+    on the box's centre line under a box (not cut by the image border) much wider than it. For a class that may stand
+    on a pedestal that island is the pedestal, and the other leg-sized islands in the box are not its legs in this
+    view: the legs of the stools and chairs round a round table stand just outside its top, inside its box."""
+    _b, r = cam.bearing_ranges_scan(best.points)
+    app = 2.0 * float(r.min()) * math.tan(area.half_angle)
+    off = float(area.angular_offsets(best.centroid[None, :])[0])
+    return _support([0], best, off, half, app, pc) is True
 
 
 def _support(group: list[int], best: Island, off: float, half: float, app: float, pc: ClassPrior) -> bool | None:

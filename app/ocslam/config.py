@@ -548,6 +548,13 @@ class ConsciousnessConfig:
         "filling the view (a wall, a shelf's side; 1: off)",
         live=True,
     )
+    central_support: bool = param(
+        True,
+        help="improved: one leg-sized island on the centre line of a box much wider than it is, for a class that may "
+        "stand on a pedestal (table), that support alone in this view: the other leg-sized islands in the box do not "
+        "join it as legs (the stools and chairs round a round table)",
+        live=True,
+    )
     pedestal_fraction: float = param(
         0.8, min=0.0, max=1.0, step=0.05,
         help="improved: a legged object seen as one small island on its box's centre line in at least this share of its "

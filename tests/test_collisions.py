@@ -195,3 +195,27 @@ def test_a_legged_objects_corner_leg_is_its_own(case: str):
         assert set(kept) == {0, 1}  # the nested object keeps the shared points; the desk keeps its others
         shared = mid if case == "flowers mid-side" else _square(4.6, 0.9)
         assert np.min(np.hypot(*(kept[0].evidence.points[:, None, :] - shared.mean(axis=0)).T)) > 0.05
+
+
+def test_a_pedestal_keeps_its_support_from_a_track_that_took_it_with_a_stool():
+    """A round table seen as its pedestal alone in every view (its footprint the table's top, 1.6 m across) and a
+    second table track made from boxes that held the pedestal and two legs of a stool beside it (its footprint
+    smaller): seen in one frame through two overlapping boxes, they share the pedestal's points and are no one
+    instance (``pedestal_fraction``). The pedestal's support is its own: the other loses it and keeps the stool's
+    legs; by footprint alone the pedestal, the larger, lost its only points and was removed (the dev world
+    cafe_corner)."""
+    ped = _square(3.4, 0.9)
+    stools = np.vstack([_square(3.9, 0.9 + 0.26 * k) for k in (0, 1)])
+    frames_a = {3.0: (0, (40.0, 120.0))}
+    frames_b = {3.0: (1, (60.0, 190.0))}
+    a = _track(0, ped, 6, frames_a)
+    a.evidence.support_obs, a.evidence.corner_obs, a.evidence.observations = 6, 0, 6
+    a.evidence.add_ray(np.array([0.0, 0.9]), np.array([1.0, 0.0]), 1.0, apparent_width=1.6)  # its top, 1.6 m across
+    a.refresh()
+    b = _track(1, np.vstack([ped, stools]), 3, frames_b)
+    assert a.footprint is not None and b.footprint is not None and b.footprint.area < a.footprint.area
+    kept = {t.id: t for t in _collide([a, b])}
+    assert set(kept) == {0, 1}
+    assert np.allclose(np.sort(kept[0].evidence.points, axis=0), np.sort(ped, axis=0))
+    bp = kept[1].evidence.points
+    assert np.min(np.hypot(bp[:, 0] - 3.4, bp[:, 1] - 0.9)) > 0.1 and len(bp) == len(stools)

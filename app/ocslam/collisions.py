@@ -357,8 +357,13 @@ def resolve_track_collisions(
                         continue
                     if not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check):
                         # together larger than one instance: the larger loses the shared points (as a
-                        # nested object's, below) and stays if it keeps points of its own
+                        # nested object's, below) and stays if it keeps points of its own; a pedestal's support
+                        # is its own whatever its footprint (principle 16: its cross-section is that support)
                         loser, other_pts = (a, shared[1]) if fa.area >= fb.area else (b, shared[0])
+                        ped_a, ped_b = (pedestal(t.evidence, q, t.prior, float(cfg.pedestal_fraction))
+                                        for t, q in ((a, shared[0]), (b, shared[1])))
+                        if ped_a != ped_b:
+                            loser, other_pts = (b, shared[0]) if ped_a else (a, shared[1])
                         if not strip_points(loser, other_pts, cfg, known_free):
                             removed.add(loser.id)
                             rep.removed += 1

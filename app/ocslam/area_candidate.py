@@ -276,9 +276,10 @@ def _hidden_by_other_box(uv: FloatArray, other_boxes: FloatArray | None, margin_
 
 def _central_support(best: Island, area: BoundingArea, half: float, pc: ClassPrior, cam: CameraModel) -> bool:
     """True if ``best`` alone, before any leg joins it, is what :func:`_support` calls a support: one leg-sized island
-    on the box's centre line under a box (not cut by the image border) much wider than it. For a class that may stand
-    on a pedestal that island is the pedestal, and the other leg-sized islands in the box are not its legs in this
-    view: the legs of the stools and chairs round a round table stand just outside its top, inside its box."""
+    on the box's centre line under a box much wider than it (its width at the island's nearest range). For a class that
+    may stand on a pedestal that island is the pedestal, and the other leg-sized islands in the box are not its legs in
+    this view: the legs of the stools and chairs round a round table stand just outside its top, inside its box. Asked
+    only of boxes not cut by the image border, whose centre line is their object's."""
     _b, r = cam.bearing_ranges_scan(best.points)
     app = 2.0 * float(r.min()) * math.tan(area.half_angle)
     off = float(area.angular_offsets(best.centroid[None, :])[0])

@@ -187,19 +187,23 @@ def area_candidate(
         w_range = 2.0 if pc.legged else 0.25
         costs = [c + w_range * (r - r_min) / max(r_min, 0.3) for (_, c, r) in passing]
         best = passing[int(np.argmin(costs))][0]
+        off_best = float(area.angular_offsets(islands[best].centroid[None, :])[0])
         group = [best]
-        if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max and not (
-            cfg.central_support and pc.pedestal and ray_w > 0.0 and _central_support(islands[best], area, half, pc, cam)
-        ):
+        # Principle 30: for a class that may stand on a pedestal, a best island that is by itself a support (one
+        # leg-sized island on the centre line of an uncut box much wider than it) is the pedestal alone in this view;
+        # the other leg-sized islands in its box (the legs of the stools and chairs round a round table, just
+        # outside its top) are not its legs.
+        central = (
+            cfg.central_support and pc.pedestal and ray_w > 0.0
+            and _support([best], islands[best], off_best, half, _apparent_width(islands[best].points, area, cam), pc) is True
+        )
+        if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max and not central:
             group = _group_legs(best, islands, behind_ok, pc)
             if cfg.point_ownership:
                 group = corner_legs(group, islands, float(cfg.leg_corner_m))
         pts_scan = np.vstack([islands[g].points for g in group])
         pts_map = T_map_scan.transform_points(pts_scan)
-        app = float("nan")
-        if ray_w > 0.0:
-            _b, r_pts = cam.bearing_ranges_scan(pts_scan)
-            app = 2.0 * float(r_pts.min()) * math.tan(area.half_angle)
+        app = _apparent_width(pts_scan, area, cam) if ray_w > 0.0 else float("nan")
         ev = ObjectEvidence()
         ev.add_points(pts_map)
         ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app, open_side=open_side)  # cut box: a viewpoint only
@@ -207,7 +211,7 @@ def area_candidate(
         legs = pc.legged and all(islands[g].physical_extent <= pc.leg_size_max for g in group)
         ev.observations, ev.leg_obs = 1, int(legs)
         if pc.legged:
-            support = _support(group, islands[best], float(area.angular_offsets(islands[best].centroid[None, :])[0]), half, app, pc)
+            support = _support(group, islands[best], off_best, half, app, pc)
             ev.support_obs, ev.corner_obs = (1, 0) if support else (0, 1)
         fp = estimate_footprint(ev, pc)
         return (
@@ -274,16 +278,10 @@ def _hidden_by_other_box(uv: FloatArray, other_boxes: FloatArray | None, margin_
     return bool(np.mean(inside.any(axis=1)) > 0.5)
 
 
-def _central_support(best: Island, area: BoundingArea, half: float, pc: ClassPrior, cam: CameraModel) -> bool:
-    """True if ``best`` alone, before any leg joins it, is what :func:`_support` calls a support: one leg-sized island
-    on the box's centre line under a box much wider than it (its width at the island's nearest range). For a class that
-    may stand on a pedestal that island is the pedestal, and the other leg-sized islands in the box are not its legs in
-    this view: the legs of the stools and chairs round a round table stand just outside its top, inside its box. Asked
-    only of boxes not cut by the image border, whose centre line is their object's."""
-    _b, r = cam.bearing_ranges_scan(best.points)
-    app = 2.0 * float(r.min()) * math.tan(area.half_angle)
-    off = float(area.angular_offsets(best.centroid[None, :])[0])
-    return _support([0], best, off, half, app, pc) is True
+def _apparent_width(points_scan: FloatArray, area: BoundingArea, cam: CameraModel) -> float:
+    """The box's width (m) at the nearest range of ``(N, 2)`` points (``base_scan``) from the camera."""
+    _b, r = cam.bearing_ranges_scan(points_scan)
+    return 2.0 * float(r.min()) * math.tan(area.half_angle)
 
 
 def _support(group: list[int], best: Island, off: float, half: float, app: float, pc: ClassPrior) -> bool | None:

@@ -5,7 +5,6 @@ its back panel make an L of points, and the box's apparent width (1.3 m) is take
 sight. Without the map the shelf is completed 1.3 m deep along its end panel, through the wall; with
 the wall in the occupancy grid it is turned the other way round and stays in front of the wall.
 Principle 21, an object is no wider across the line of sight than its boxes show it (by a margin).
-Principle 31, a face flush with a wall is an open object's back: a bookcase's back panel alone extends towards the robot.
 """
 
 from __future__ import annotations
@@ -130,64 +129,3 @@ def test_points_spread_wider_than_the_box_are_not_all_the_objects():
     half = np.array([fp.size_x, fp.size_y]) / 2 + 1e-9
     assert np.all(np.abs(R @ (np.array([3.0, 0.0]) - fp.center)) <= half)
     assert not np.all(np.abs(R @ (np.array([3.21, 1.2]) - fp.center)) <= half)
-
-
-# Principle 31: a face flush with a wall is an open object's back, seen from the room. A bookcase against a wall
-# seen from in front of it: the LIDAR passes its open front and sees the inside of its back panel, 2 cm in front of
-# the wall's face; its side panels' points went to the boxes of its neighbours in the row.
-BACK_Y = 0.02
-
-
-def _back_panel_evidence() -> ObjectEvidence:
-    ev = ObjectEvidence()
-    ev.add_points(np.stack([np.linspace(-0.45, 0.45, 19), np.full(19, BACK_Y)], axis=1))
-    for o in np.stack([np.linspace(-0.3, 0.3, 5), np.full(5, 2.0)], axis=1):
-        ev.add_ray(o, np.array([0.0, 0.2]) - o, 1.0, apparent_width=1.0)
-    return ev
-
-
-def _wall_grid(wall_past_ends: bool = True) -> OccupancyGrid:
-    """Free in front of the wall (the shelf's open inside too), the wall's face one row of cells at y ∈ [-0.05, 0]
-    (the LIDAR sees only its surface), unknown behind it. Without ``wall_past_ends`` the obstacle cells stop at the
-    panel's ends: a free-standing face, no wall."""
-    grid = OccupancyGrid(0.05, Pose2(-2.0, -1.0, 0.0), np.full((80, 80), -1, dtype=np.int8))
-    cc = grid.cell_centers().reshape(-1, 2)
-    d = np.full(len(cc), -1)
-    d[cc[:, 1] > 0.05] = 0
-    face = (cc[:, 1] > -0.05) & (cc[:, 1] < 0.05)
-    if not wall_past_ends:
-        face &= np.abs(cc[:, 0]) < 0.5
-    d[face] = 100
-    grid.data = d.astype(np.int8).reshape(80, 80)
-    return grid
-
-
-def _y_extent(fp) -> tuple[float, float]:
-    c, s = np.cos(fp.yaw), np.sin(fp.yaw)
-    corners = np.array([[sx * fp.size_x / 2, sy * fp.size_y / 2] for sx in (-1, 1) for sy in (-1, 1)])
-    y = fp.center[1] + corners @ np.array([s, c])
-    return float(y.min()), float(y.max())
-
-
-def test_a_bookcase_back_panel_flush_with_a_wall_extends_towards_the_robot():
-    ev, shelf = _back_panel_evidence(), CLASS_PRIORS["shelf"]
-    blind = estimate_footprint(ev, shelf, known_free=GridSpace(_wall_grid(), walls=False))
-    assert _y_extent(blind)[0] < -0.25  # the mistake this rule mends: completed through the wall
-    fp = estimate_footprint(ev, shelf, known_free=GridSpace(_wall_grid(), walls=True))
-    lo, hi = _y_extent(fp)
-    assert lo >= -0.05  # in front of the wall
-    assert hi - lo == pytest.approx(shelf.width[1], abs=0.05)  # its depth is the class's shorter side
-    assert max(fp.size_x, fp.size_y) == pytest.approx(0.9, abs=0.15)  # along the wall
-
-
-def test_a_face_that_no_wall_continues_or_a_closed_class_is_completed_behind_it():
-    """A free-standing face (no obstacle cells past its ends) and a class closed at the LIDAR's height (a sofa's
-    front is its front, wherever it stands) keep the usual completion, away from the robot."""
-    ev = _back_panel_evidence()
-    for label, grid in (("shelf", _wall_grid(wall_past_ends=False)), ("chair", _wall_grid())):
-        pc = CLASS_PRIORS[label]
-        blind = estimate_footprint(ev, pc, known_free=GridSpace(grid, walls=False))
-        fp = estimate_footprint(ev, pc, known_free=GridSpace(grid, walls=True))
-        np.testing.assert_allclose(fp.center, blind.center)
-        assert (fp.size_x, fp.size_y) == (blind.size_x, blind.size_y)
-        assert _y_extent(fp)[0] < -0.1

@@ -20,8 +20,6 @@ beams (a door blocks all of it, a potted plant only its pot): used by the see-th
 ``on_wall``: the object sits in a wall (doors), so its island legitimately continues into the wall.
 ``pedestal``: some instances stand on one central support much smaller than the object (a round table's
 column), so a lone small island on the box's centre line may be all the LIDAR ever sees of it.
-``open_front``: the object is open towards the room at the LIDAR's height (a bookcase: its plinth is lower), so
-the LIDAR sees the inside of its back and sides, a U, and its back may be the only face seen.
 """
 
 from __future__ import annotations
@@ -45,7 +43,6 @@ class ClassPrior:
     solid_fraction: float = 0.0
     on_wall: bool = False
     pedestal: bool = False
-    open_front: bool = False
     #: Largest horizontal extent of one leg island (m); islands larger than this are never legs.
     leg_size_max: float = 0.35
     shapes: tuple[tuple[float, float], ...] = ()
@@ -148,7 +145,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("extinguisher", (0.1, 0.23, 0.4), (0.08, 0.18, 0.35), (0.3, 0.77, 1.0), solid_fraction=0.3),
         ClassPrior("flowers", (0.12, 0.25, 0.7), (0.12, 0.19, 0.7), (0.35, 0.99, 1.4), solid_fraction=0.1),
         ClassPrior(
-            "shelf", (0.6, 1.0, 1.5), (0.25, 0.4, 0.7), (0.9, 2.3, 2.9), solid_fraction=0.5, open_front=True,
+            "shelf", (0.6, 1.0, 1.5), (0.25, 0.4, 0.7), (0.9, 2.3, 2.9), solid_fraction=0.5,
             shapes=((1.0, 0.4), (1.2, 0.35)),
         ),
     )

@@ -541,13 +541,6 @@ class ConsciousnessConfig:
         "against a wall seen from the side) or kept to its points",
         live=True,
     )
-    face_on_wall: bool = param(
-        True,
-        help="improved, footprints: a face of points flush with a wall the map knows (its line continues past the face "
-        "as obstacle cells) is the object's back against that wall, not its front: the object extends towards the "
-        "robot, even over space seen free (an open shelf's back panel seen between its sides)",
-        live=True,
-    )
     wide_box_fraction: float = param(
         0.85, min=0.0, max=1.0, step=0.05,
         help="improved: a box at least this share of the image wide makes no new object, it only sees one made before: "

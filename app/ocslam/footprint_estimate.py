@@ -143,34 +143,6 @@ def _extension_free(
     return int(np.count_nonzero(free)) / len(free) > 0.6
 
 
-#: a face's line is followed this far past each of its ends to see whether a wall continues it (m)
-_WALL_PAST_M = (0.15, 0.6)
-#: ... and this share of those samples must be obstacle cells, at the face or up to 0.1 m behind it
-_WALL_SHARE = 0.7
-
-
-def _face_on_wall(
-    occupied: Callable[[FloatArray], NDArray[np.bool_]] | None, axes: FloatArray, i: int, face: float, sgn: int,
-    lo: FloatArray, hi: FloatArray,
-) -> bool:
-    """True if the face of the points' rectangle at ``face`` on axis ``i`` (seen from side ``sgn``) lies on a wall:
-    past one of its ends (along the other axis) the map knows obstacle cells at the face or just behind it, along
-    most of ``_WALL_PAST_M``."""
-    if occupied is None or sgn == 0:
-        return False
-    j = 1 - i
-    depth = face - sgn * np.array([0.0, 0.05, 0.1])
-    t = linspace(_WALL_PAST_M[0], _WALL_PAST_M[1], 10)
-    for along in (hi[j] + t, lo[j] - t):
-        rect = np.empty((len(depth) * len(along), 2))
-        rect[:, i] = np.repeat(depth, len(along))
-        rect[:, j] = np.tile(along, len(depth))
-        occ = np.asarray(occupied(rect @ axes), dtype=bool).reshape(len(depth), len(along)).any(axis=0)
-        if float(np.mean(occ)) >= _WALL_SHARE:
-            return True
-    return False
-
-
 def estimate_footprint(
     ev: ObjectEvidence,
     pc: ClassPrior,
@@ -202,10 +174,7 @@ def estimate_footprint(
     the part of the footprint the points do not show must lie behind the object's own face: when most of it
     is seen, from every viewpoint, only through an obstacle away from the points (a wall), the object is
     turned the other way round (``depth_axis_hint``: the rectangle axis of the points taken as the depth
-    axis), and kept to its points when that is no better (:func:`unseen_part_conflict`). For a class open at the
-    front (``pc.open_front``: a bookcase) and a grid that allows it (``known_free.wall_cells``), a face the map's obstacle
-    cells continue past one of its ends is the object's back against a wall (:func:`_face_on_wall`): the object
-    extends towards the robot by its class's shorter side, over space seen free (its open inside).
+    axis), and kept to its points when that is no better (:func:`unseen_part_conflict`).
     """
     L, W = pc.length, pc.width
     if not ev.has_points:
@@ -310,7 +279,6 @@ def estimate_footprint(
         # partly something else's (a table's legs beside a chair's), not a wider instance of the class
         tan_max = min(tan_max, max(k * w_app, w_app + 0.2))
 
-    wall_cells = getattr(known_free, "wall_cells", None) if pc.open_front else None
     s_lo, s_hi, s_prior, size, lam = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.ones(2)
     for i in range(2):
         cap = tan_max if i == tan_axis else max(dep_max, W[2])
@@ -340,8 +308,7 @@ def estimate_footprint(
             slack = 0.05 * d_obs[i] + 0.01
             s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
             s_prior[i] = mid[i]
-        elif (known_free is not None and _extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
-              and not _face_on_wall(wall_cells, axes, i, hi[i] if side[i] > 0 else lo[i], side[i], lo, hi)):
+        elif known_free is not None and _extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i]):
             # the space it would extend into is known free: keep what was seen
             size[i] = max(d_obs[i], 0.05)
             slack = 0.05 * d_obs[i] + 0.01
@@ -351,14 +318,7 @@ def estimate_footprint(
             # seen from one side only: the object extends away from the robot by its depth
             sgn = side[i]
             face = hi[i] if sgn > 0 else lo[i]
-            d_nom, d_min, d_max = dep_nom, dep_min, dep_max
-            if _face_on_wall(wall_cells, axes, i, face, sgn, lo, hi):
-                # ... unless the face is flush with a wall: it is the object's back, seen from the room, and the
-                # object's depth is its class's shorter side
-                sgn = -sgn
-                face = hi[i] if sgn > 0 else lo[i]
-                d_nom, d_min, d_max = W[1], W[0], W[2]
-            t_nom, t_min, t_max = max(d_obs[i], d_nom), max(d_obs[i], d_min), max(d_obs[i], d_max)
+            t_nom, t_min, t_max = max(d_obs[i], dep_nom), max(d_obs[i], dep_min), max(d_obs[i], dep_max)
             size[i] = t_nom
             c_min, c_max = face - sgn * t_min / 2, face - sgn * t_max / 2
             s_lo[i], s_hi[i] = min(c_min, c_max), max(c_min, c_max)

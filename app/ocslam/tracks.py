@@ -187,15 +187,11 @@ class GridSpace:
     """What the occupancy grid knows of ``(N, 2)`` points (grid frame): called, True where it knows free
     space (a :data:`~app.ocslam.footprint_estimate.FreeFn`); ``occupied``, ``None`` or a function True where
     it knows the cell is not free (occupancy ≥ :data:`FREE_BELOW`; the sweep's compact grids keep exactly this
-    split), which footprints ask for known obstacles (principle 20; ``None`` when it is switched off), and
-    ``wall_cells``, the same for principle 31."""
+    split), which footprints ask for known obstacles (principle 20; ``None`` when it is switched off)."""
 
-    def __init__(self, grid: OccupancyGrid, occupied: bool = True, walls: bool = False) -> None:
+    def __init__(self, grid: OccupancyGrid, occupied: bool = True) -> None:
         self._grid = grid
         self.occupied: Callable[[FloatArray], NDArray[np.bool_]] | None = self._not_free if occupied else None
-        #: the same test, where footprints may read a face that obstacles continue as an open object's back against
-        #: a wall (principle 31, ``consciousness.face_on_wall``); ``None`` when it is switched off
-        self.wall_cells: Callable[[FloatArray], NDArray[np.bool_]] | None = self._not_free if walls else None
 
     def _values(self, points: FloatArray) -> NDArray[np.int64]:
         """``(N,)`` cell values, −1 (unknown) outside the grid."""
@@ -217,13 +213,12 @@ class GridSpace:
         return self._values(points) >= FREE_BELOW
 
 
-def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True, walls: bool = False) -> GridSpace | None:
+def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True) -> GridSpace | None:
     """A :class:`GridSpace` of ``grid`` (``None`` without a usable grid); ``occupied``: whether footprints
-    may ask it for known obstacles (``consciousness.hidden_behind_own_face``), ``walls`` whether a face on a wall is an
-    open object's back (``consciousness.face_on_wall``)."""
+    may ask it for known obstacles (``consciousness.hidden_behind_own_face``)."""
     if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
         return None
-    return GridSpace(grid, occupied, walls)
+    return GridSpace(grid, occupied)
 
 
 def along_ray_close(origin: FloatArray, a: FloatArray, b: FloatArray, thr: float, rel: float = 0.25) -> bool:

@@ -64,3 +64,21 @@ def test_a_box_whose_top_edge_is_lower_than_its_class_does_not_take_the_island()
         found[check] = (sources, rejected.get("corner_top", 0), rejected.get("corner_short", 0))
     assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
     assert found[False][1] == 0 and found[False][2] == 0 and "lidar_island" in found[False][0]
+
+
+def test_a_counter_boxed_as_a_shelf_is_read_at_its_front():
+    """A 0.75 m kitchen counter boxed as a shelf at 3 m, its top inside the image. A bookcase's highest point stands
+    above its front (``ClassPrior.top_at_front``), so the box's top row is read at the counter's front: 0.8 m, lower
+    than any shelf (≥ 0.9 m), and the island is no shelf's (``corner_top``). Read as deep as the deepest shelf (0.7 m
+    farther back, as for a chair's back) the row passes, and the box's height (0.75 m) passes the height check's
+    tolerance: without ``top_edge_front`` the counter makes a shelf."""
+    from synthetic_scene import Box
+
+    counter = Box(3.3, 0.0, 0.6, 1.6, 0.0, 0.0, 0.75)
+    found = {}
+    for front in (True, False):
+        sources, rejected, top = _boxed_six_frames("shelf", counter, top_edge_front=front)
+        assert top > 2  # its top is in the image, in every frame
+        found[front] = (sources, rejected.get("corner_top", 0), rejected.get("corner_short", 0))
+    assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
+    assert found[False][1] == 0 and found[False][2] == 0 and "lidar_island" in found[False][0]

@@ -430,12 +430,14 @@ def _top_below_class(y1: float, r_front: float, pc: ClassPrior, cam: CameraModel
 
     Every point of the object lies at or below the ray through ``y1``: at range ``d`` it is at most
     ``h_cam + (c_y − y1)/f_y · d`` high. The point at the top row is the object's highest seen from the camera, the
-    nearest part of a flat top above the camera (a door, a table) or a part farther back (a chair's back), but no
-    farther than ``r_front`` plus the largest size of the class's shorter side; if even there the ray (with
-    ``bottom_margin_px`` of slack on the row) stays below the class's lowest instance, the island is not this box's
-    object. Pinhole, level camera."""
+    nearest part of a flat top above the camera (a table) or a part farther back (a chair's back), but no
+    farther than ``r_front`` plus the largest size of the class's shorter side — at ``r_front`` itself for a class whose
+    highest point stands above its front (``pc.top_at_front``: a bookcase's or a door's top edge; with
+    ``cfg.top_edge_front``); if even there the ray (with ``bottom_margin_px`` of slack on the row) stays below the
+    class's lowest instance, the island is not this box's object. Pinhole, level camera."""
     rows_above = cam.info.cy - (y1 - float(cfg.bottom_margin_px))
-    z_top = cam.camera_height + rows_above / cam.info.fy * (r_front + pc.width[2])
+    depth = 0.0 if (pc.top_at_front and cfg.top_edge_front) else pc.width[2]
+    z_top = cam.camera_height + rows_above / cam.info.fy * (r_front + depth)
     return bool(z_top < pc.height[0])
 
 

@@ -20,6 +20,8 @@ beams (a door blocks all of it, a potted plant only its pot): used by the see-th
 ``on_wall``: the object sits in a wall (doors), so its island legitimately continues into the wall.
 ``pedestal``: some instances stand on one central support much smaller than the object (a round table's
 column), so a lone small island on the box's centre line may be all the LIDAR ever sees of it.
+``top_at_front``: the object's highest point stands above its nearest face (a bookcase's front top edge): a box's
+top row shows it at the range of the object's front, not farther back (a chair's back, a person's head).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class ClassPrior:
     solid_fraction: float = 0.0
     on_wall: bool = False
     pedestal: bool = False
+    top_at_front: bool = False
     #: Largest horizontal extent of one leg island (m); islands larger than this are never legs.
     leg_size_max: float = 0.35
     shapes: tuple[tuple[float, float], ...] = ()
@@ -134,7 +137,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
             leg_shapes=((0.42, 0.42),),
         ),
         ClassPrior(
-            "door", (0.6, 1.0, 1.3), (0.02, 0.3, 0.45), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True,
+            "door", (0.6, 1.0, 1.3), (0.02, 0.3, 0.45), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True, top_at_front=True,
             shapes=((1.0, 0.3),),
         ),
         ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.075, 0.16), (0.05, 0.1, 0.16)),
@@ -145,7 +148,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("extinguisher", (0.1, 0.23, 0.4), (0.08, 0.18, 0.35), (0.3, 0.77, 1.0), solid_fraction=0.3),
         ClassPrior("flowers", (0.12, 0.25, 0.7), (0.12, 0.19, 0.7), (0.35, 0.99, 1.4), solid_fraction=0.1),
         ClassPrior(
-            "shelf", (0.6, 1.0, 1.5), (0.25, 0.4, 0.7), (0.9, 2.3, 2.9), solid_fraction=0.5,
+            "shelf", (0.6, 1.0, 1.5), (0.25, 0.4, 0.7), (0.9, 2.3, 2.9), solid_fraction=0.5, top_at_front=True,
             shapes=((1.0, 0.4), (1.2, 0.35)),
         ),
     )

@@ -353,6 +353,12 @@ class ConsciousnessConfig:
         "plus the class's depth, lies lower than the class's lowest instance (a cabinet or a chair's back boxed as a door)",
         live=True,
     )
+    top_edge_front: bool = param(
+        True,
+        help="improved, top-edge check: for a class whose highest point stands above its front (shelves, doors), the top "
+        "row is read at the island's range, not up to the class's depth farther back (a low cabinet boxed as a shelf)",
+        live=True,
+    )
     size_consistency_tolerance: float = param(
         0.6, min=0.05, max=5.0, step=0.05, help="improved: relative range error allowed by the box-size check", live=True
     )

@@ -33,6 +33,19 @@ def _boxed_six_frames(label: str, shape, **switches) -> tuple[list[str], dict[st
     return [t.source for t in c._tracks if t.label == label], rejected, top
 
 
+def _assert_the_top_edge_decides(label: str, shape, switch: str) -> None:
+    """``shape`` boxed as ``label`` in six frames, its box's top inside the image in each: with ``switch`` on, the
+    top-edge check turns its island down in every frame (``corner_top``) and no object is made of it; with it off,
+    neither that check nor the box-height check fires, and the island makes a ``label``."""
+    found = {}
+    for on in (True, False):
+        sources, rejected, top = _boxed_six_frames(label, shape, **{switch: on})
+        assert top > 2  # its top is in the image, in every frame
+        found[on] = (sources, rejected.get("corner_top", 0), rejected.get("corner_short", 0))
+    assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
+    assert found[False][1] == 0 and found[False][2] == 0 and "lidar_island" in found[False][0]
+
+
 def test_a_box_lower_than_its_class_does_not_take_the_island():
     """A 0.45 m stool boxed as a shelf (the detector's mistake): at the stool's range the box is 0.45 m high, lower
     than any shelf (≥ 0.9 m, over the size tolerance), so its island is no shelf's (``corner_short``); without the
@@ -50,20 +63,13 @@ def test_a_box_lower_than_its_class_does_not_take_the_island():
 
 
 def test_a_box_whose_top_edge_is_lower_than_its_class_does_not_take_the_island():
-    """A 1.2 m cabinet boxed as a door (the detector's mistake), its top inside the image: at the cabinet's range,
-    even as deep as the deepest door, the box's top edge is 1.4 m above the floor, lower than any door (≥ 1.6 m), so
-    its island is no door's (``corner_top``). The box's height alone (1.2 m) passes the height check's tolerance;
+    """A 1.2 m cabinet boxed as a door (the detector's mistake), its top inside the image: at the cabinet's range
+    (a door's top stands above its front), and even read as deep as the deepest door, the box's top edge is at most
+    1.4 m above the floor, lower than any door (≥ 1.6 m), so its island is no door's (``corner_top``). The box's height alone (1.2 m) passes the height check's tolerance;
     without the top-edge check the cabinet makes a door."""
     from synthetic_scene import Box
 
-    cabinet = Box(3.2, 0.0, 0.4, 0.8, 0.0, 0.0, 1.2)
-    found = {}
-    for check in (True, False):
-        sources, rejected, top = _boxed_six_frames("door", cabinet, top_edge_check=check)
-        assert top > 2  # its top is in the image, in every frame
-        found[check] = (sources, rejected.get("corner_top", 0), rejected.get("corner_short", 0))
-    assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
-    assert found[False][1] == 0 and found[False][2] == 0 and "lidar_island" in found[False][0]
+    _assert_the_top_edge_decides("door", Box(3.2, 0.0, 0.4, 0.8, 0.0, 0.0, 1.2), "top_edge_check")
 
 
 def test_a_counter_boxed_as_a_shelf_is_read_at_its_front():
@@ -74,11 +80,4 @@ def test_a_counter_boxed_as_a_shelf_is_read_at_its_front():
     tolerance: without ``top_edge_front`` the counter makes a shelf."""
     from synthetic_scene import Box
 
-    counter = Box(3.3, 0.0, 0.6, 1.6, 0.0, 0.0, 0.75)
-    found = {}
-    for front in (True, False):
-        sources, rejected, top = _boxed_six_frames("shelf", counter, top_edge_front=front)
-        assert top > 2  # its top is in the image, in every frame
-        found[front] = (sources, rejected.get("corner_top", 0), rejected.get("corner_short", 0))
-    assert found[True][1] >= 6 and "lidar_island" not in found[True][0]
-    assert found[False][1] == 0 and found[False][2] == 0 and "lidar_island" in found[False][0]
+    _assert_the_top_edge_decides("shelf", Box(3.3, 0.0, 0.6, 1.6, 0.0, 0.0, 0.75), "top_edge_front")

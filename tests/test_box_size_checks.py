@@ -65,8 +65,8 @@ def test_a_box_lower_than_its_class_does_not_take_the_island():
 def test_a_box_whose_top_edge_is_lower_than_its_class_does_not_take_the_island():
     """A 1.2 m cabinet boxed as a door (the detector's mistake), its top inside the image: at the cabinet's range
     (a door's top stands above its front), and even read as deep as the deepest door, the box's top edge is at most
-    1.4 m above the floor, lower than any door (≥ 1.6 m), so its island is no door's (``corner_top``). The box's height alone (1.2 m) passes the height check's tolerance;
-    without the top-edge check the cabinet makes a door."""
+    1.4 m above the floor, lower than any door (≥ 1.6 m), so its island is no door's (``corner_top``). The box's
+    height alone (1.2 m) passes the height check's tolerance; without the top-edge check the cabinet makes a door."""
     from synthetic_scene import Box
 
     _assert_the_top_edge_decides("door", Box(3.2, 0.0, 0.4, 0.8, 0.0, 0.0, 1.2), "top_edge_check")

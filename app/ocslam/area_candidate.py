@@ -193,9 +193,10 @@ def area_candidate(
         # leg-sized island on the centre line of an uncut box much wider than it) is the pedestal alone in this view;
         # the other leg-sized islands in its box (the legs of the stools and chairs round a round table, just
         # outside its top) are not its legs.
+        app = _apparent_width(islands[best].points, area, cam) if ray_w > 0.0 else float("nan")  # at the best island
         central = (
             cfg.central_support and pc.pedestal and ray_w > 0.0
-            and _support([best], islands[best], off_best, half, _apparent_width(islands[best].points, area, cam), pc) is True
+            and _support([best], islands[best], off_best, half, app, pc) is True
         )
         if cfg.legs and pc.legged and islands[best].physical_extent <= pc.leg_size_max and not central:
             group = _group_legs(best, islands, behind_ok, pc)
@@ -203,7 +204,8 @@ def area_candidate(
                 group = corner_legs(group, islands, float(cfg.leg_corner_m))
         pts_scan = np.vstack([islands[g].points for g in group])
         pts_map = T_map_scan.transform_points(pts_scan)
-        app = _apparent_width(pts_scan, area, cam) if ray_w > 0.0 else float("nan")
+        if ray_w > 0.0 and len(group) > 1:
+            app = _apparent_width(pts_scan, area, cam)  # at the group's nearest point
         ev = ObjectEvidence()
         ev.add_points(pts_map)
         ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app, open_side=open_side)  # cut box: a viewpoint only
@@ -431,8 +433,8 @@ def _top_below_class(y1: float, r_front: float, pc: ClassPrior, cam: CameraModel
     Every point of the object lies at or below the ray through ``y1``: at range ``d`` it is at most
     ``h_cam + (c_y − y1)/f_y · d`` high. The point at the top row is the object's highest seen from the camera, the
     nearest part of a flat top above the camera (a table) or a part farther back (a chair's back), but no
-    farther than ``r_front`` plus the largest size of the class's shorter side — at ``r_front`` itself for a class whose
-    highest point stands above its front (``pc.top_at_front``: a bookcase's or a door's top edge; with
+    farther than ``r_front`` plus the largest size of the class's shorter side — at ``r_front`` itself for a class
+    whose highest point stands above its front (``pc.top_at_front``: a bookcase's or a door's top edge; with
     ``cfg.top_edge_front``); if even there the ray (with ``bottom_margin_px`` of slack on the row) stays below the
     class's lowest instance, the island is not this box's object. Pinhole, level camera."""
     rows_above = cam.info.cy - (y1 - float(cfg.bottom_margin_px))

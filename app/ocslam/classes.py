@@ -137,8 +137,8 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
             leg_shapes=((0.42, 0.42),),
         ),
         ClassPrior(
-            "door", (0.6, 1.0, 1.3), (0.02, 0.3, 0.45), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True, top_at_front=True,
-            shapes=((1.0, 0.3),),
+            "door", (0.6, 1.0, 1.3), (0.02, 0.3, 0.45), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True,
+            top_at_front=True, shapes=((1.0, 0.3),),
         ),
         ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.075, 0.16), (0.05, 0.1, 0.16)),
         ClassPrior(

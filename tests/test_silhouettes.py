@@ -17,7 +17,7 @@ class _Measured:
     def __init__(self, coarse: dict, fine: dict) -> None:
         self.coarse, self.fine, self.fine_asked = coarse, fine, []
 
-    def measure(self, T, K, width, height, ids, *, max_pixels=None):
+    def measure(self, T, K, width, height, ids, *, max_pixels=None, raster_pixels=None):
         return {i: self.coarse[i] for i in ids}
 
     def silhouettes(self, T, K, width, height, ids, *, max_pixels=None):
@@ -124,3 +124,34 @@ def test_coarse_error_bounds_hold_and_decisions_match_fine_renders(views) -> Non
     assert total > 40
     assert held >= 0.95 * total
     assert total - counting.fine >= 0.4 * total
+
+
+def test_hull_fills_agree_with_fine_renders_within_their_bounds(views) -> None:
+    """On rendered views: areas drawn from the models' convex parts (the first measure of ``label_silhouettes``)
+    hold the fine renders' areas within their error bounds, and most objects are drawn, not rendered."""
+    from app.training.part_hulls import model_hulls
+    from app.training.silhouettes import ModelClient, SilhouetteRenderer
+
+    world, class_of, frames = views
+    clients = ModelClient()
+    drawn = held = total = 0
+    try:
+        with SilhouetteRenderer(world, clients=clients) as sil:
+            for frame, cands in frames:
+                args = (frame.T_world_camera, frame.info.K, 320, 240)
+                fine = sil.silhouettes(*args, list(cands))
+                first = sil.measure(*args, list(cands), max_pixels=512, raster_pixels=16384)
+                for i, (a, ins, ea, ei) in first.items():
+                    o = world.objects[i]
+                    c, s = np.cos(o.yaw), np.sin(o.yaw)
+                    T_wo = np.array([[c, -s, 0, o.x], [s, c, 0, o.y], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+                    z = (np.linalg.solve(frame.T_world_camera, T_wo) @ clients.corners(o.model, o.scale).T)[2]
+                    if model_hulls(o.model, o.scale) is None or z.min() <= sil.near:
+                        continue  # rendered: a model that is not convex, or one reaching behind the near plane
+                    drawn += 1
+                    held += abs(a - fine[i][0]) <= ea and abs(ins - fine[i][1]) <= ei
+                total += len(first)
+    finally:
+        clients.close()
+    assert drawn >= 0.6 * total > 20
+    assert held >= 0.97 * drawn

@@ -89,13 +89,21 @@ def run(args: argparse.Namespace) -> int:
         return 2
     extra = {"renderer": args.renderer} if args.renderer else {}
     if args.renderer == "egl":
-        from app.sim.renderer import RendererError, resolve_renderer
+        import threading
 
+        from app.sim.renderer import RendererError, resolve_renderer
+        from app.training.dataset import preload_worker_modules
+
+        # the workers' modules are imported while the probe's process loads the plugin (it waits, not us)
+        preload = threading.Thread(target=preload_worker_modules, name="preload", daemon=True)
+        preload.start()
         try:
             resolve_renderer("egl")
         except RendererError as e:
             print(f"ocslam: error: dataset: {e}", file=sys.stderr)
             return 2
+        finally:
+            preload.join()
     opts = DatasetOptions(
         out=args.out,
         worlds=args.worlds,

@@ -46,6 +46,7 @@ regions and each box's visible fraction) for ``ocslam bench detector``.
 
 from __future__ import annotations
 
+import importlib
 import json
 import multiprocessing as mp
 import os
@@ -207,6 +208,25 @@ def _init_worker(q) -> None:
     os.environ.setdefault("LP_NUM_THREADS", "1")
 
 
+#: what a worker imports to render a world (``yourdfpy`` and ``trimesh`` alone take about a second): the parent
+#: imports them before it forks the workers, which inherit them instead of each importing them again
+WORKER_MODULES: tuple[str, ...] = (
+    "pybullet",
+    "app.config",
+    "app.sim_world",
+    "app.world.format",
+    "app.world.generator",
+    "app.training.part_hulls",
+)
+
+
+def preload_worker_modules() -> None:
+    """Import :data:`WORKER_MODULES` in this process (the parent, before it forks the workers; safe to call
+    from a thread, e.g. while the EGL probe runs)."""
+    for name in WORKER_MODULES:
+        importlib.import_module(name)
+
+
 class DatasetError(RuntimeError):
     """Rendering failed (e.g. a worker process died); the message names the worlds left unrendered."""
 
@@ -356,6 +376,7 @@ def _run_workers(tasks: list[WorldTask], opts: DatasetOptions, render: Callable[
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = mp.get_context("fork")
+    preload_worker_modules()  # forked workers inherit them
     q = ctx.Queue()
     records: list[dict] = []
     ex = ProcessPoolExecutor(min(opts.workers, len(tasks)), mp_context=ctx, initializer=_init_worker, initargs=(q,))

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.training.labels import LabelFilter, box_corners, label_kept
+from app.training.part_hulls import model_hulls, raster_silhouette
 
 __all__ = ["silhouette_window", "frustum_matrix", "ModelClient", "SilhouetteRenderer", "label_silhouettes"]
 
@@ -88,6 +89,12 @@ def frustum_matrix(
     return m.T.ravel().tolist()  # column-major
 
 
+def _grid(w: int, h: int, max_pixels: int) -> tuple[int, int]:
+    """The render grid ``(rw, rh)`` of a ``w × h``-pixel window drawn on at most about ``max_pixels``."""
+    s = max(1.0, math.sqrt(w * h / max_pixels))
+    return max(1, int(math.ceil(w / s))), max(1, int(math.ceil(h / s)))
+
+
 class ModelClient:
     """The object models (per scale) in one pybullet DIRECT client, each alone at the origin, geometry from
     ``app.world.models.bodies.build_model_pybullet`` exactly as the simulator builds it. :meth:`get` shows
@@ -113,32 +120,43 @@ class ModelClient:
         for b in self._models[key][0] if key is not None else ():
             p.changeVisualShape(b, -1, rgbaColor=[1.0, 1.0, 1.0, alpha], physicsClientId=self._cid)
 
+    def corners(self, model: str, scale: float) -> NDArray[np.float64]:
+        """AABB corners ``[8, 4]`` (homogeneous, object frame) of ``model`` at ``scale``, built in the client
+        if it is new; what the client draws does not change."""
+        key = (str(model), float(scale))
+        if key not in self._models:
+            self._build(key)
+        return self._models[key][1]
+
     def get(self, model: str, scale: float) -> tuple[int, NDArray[np.float64]]:
         """``(client, AABB corners [8, 4] homogeneous, object frame)`` of ``model`` at ``scale``, the only
         model drawn in the client until the next call."""
-        import pybullet as p
-
         key = (str(model), float(scale))
-        if self._cid < 0:
-            self._cid = p.connect(p.DIRECT)
         if key not in self._models:
-            from app.world.models.bodies import build_model_pybullet
-
-            cid = self._cid
-            bodies = [b for b, _ in build_model_pybullet(cid, key[0], 0.0, 0.0, 0.0, scale=key[1])]
-            lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-            for b in bodies:
-                a0, a1 = p.getAABB(b, -1, physicsClientId=cid)
-                lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
-            corners = np.c_[box_corners(lo, hi), np.ones(8)]
-            visual = [b for b in bodies if p.getVisualShapeData(b, physicsClientId=cid)]
-            self._models[key] = (visual, corners)
-            self._show(key, 0.0)
+            self._build(key)
         if self._shown != key:
             self._show(self._shown, 0.0)
             self._show(key, 1.0)
             self._shown = key
         return self._cid, self._models[key][1]
+
+    def _build(self, key: tuple[str, float]) -> None:
+        import pybullet as p
+
+        from app.world.models.bodies import build_model_pybullet
+
+        if self._cid < 0:
+            self._cid = p.connect(p.DIRECT)
+        cid = self._cid
+        bodies = [b for b, _ in build_model_pybullet(cid, key[0], 0.0, 0.0, 0.0, scale=key[1])]
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for b in bodies:
+            a0, a1 = p.getAABB(b, -1, physicsClientId=cid)
+            lo, hi = np.minimum(lo, a0), np.maximum(hi, a1)
+        corners = np.c_[box_corners(lo, hi), np.ones(8)]
+        visual = [b for b in bodies if p.getVisualShapeData(b, physicsClientId=cid)]
+        self._models[key] = (visual, corners)
+        self._show(key, 0.0)
 
     def close(self) -> None:
         import pybullet as p
@@ -221,6 +239,7 @@ class SilhouetteRenderer:
         margin: float = 1.0,
         margin_top: float = 0.0,
         max_pixels: int | None = None,
+        raster_pixels: int | None = None,
     ) -> dict[int, tuple[int, int, int, int]]:
         """:meth:`silhouettes` with an error bound on each area: ``{object id: (area, area inside the frame,
         ± area error, ± inside error)}``, all in image pixels. A window rendered at the image's own scale has
@@ -228,7 +247,12 @@ class SilhouetteRenderer:
         render pixels its outline crosses: those on either side of the outline (a pixel counts whole or not
         at all by its centre), and for the inside area also the silhouette's pixels that straddle a frame
         edge. (A feature thinner than a render pixel can fall between the pixel centres unseen: callers
-        that must be sure render finely, see :func:`label_silhouettes`.)"""
+        that must be sure render finely, see :func:`label_silhouettes`.)
+
+        ``raster_pixels``: objects whose model is made of convex parts are not rendered but drawn from the
+        parts' hulls (:func:`app.training.part_hulls.raster_silhouette`) on at most that many pixels, with
+        the same bound (a fill and a render differ by the pixels the outline crosses); the others, and any
+        object that reaches behind the near plane, are rendered at ``max_pixels``."""
         import pybullet as p
 
         T_wc = np.asarray(T_world_camera, dtype=np.float64)
@@ -239,32 +263,42 @@ class SilhouetteRenderer:
             if not 0 <= oid < len(self.world.objects):
                 continue
             o = self.world.objects[oid]
-            cid, corners = self._clients.get(o.model, o.scale)
+            corners = self._clients.corners(o.model, o.scale)
             c, s_ = math.cos(o.yaw), math.sin(o.yaw)
             T_wo = np.array([[c, -s_, 0.0, o.x], [s_, c, 0.0, o.y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
             T = np.linalg.solve(T_wo, T_wc)  # the camera in the object's frame
-            T_cam_world = np.linalg.inv(T)
+            T_cam_obj = np.linalg.inv(T)
             eye = T[:3, 3]
-            win = silhouette_window((T_cam_world @ corners.T).T[:, :3], K, width, height, self.near, margin, margin_top)
+            win = silhouette_window((T_cam_obj @ corners.T).T[:, :3], K, width, height, self.near, margin, margin_top)
             if win is None:
                 out[oid] = (0, 0, 0, 0)
                 continue
             u0, v0, u1, v1 = win
             w, h = u1 - u0, v1 - v0
-            s = max(1.0, math.sqrt(w * h / max_pixels))
-            rw, rh = max(1, int(math.ceil(w / s))), max(1, int(math.ceil(h / s)))
-            view = p.computeViewMatrix(eye.tolist(), (eye + T[:3, 2]).tolist(), (-T[:3, 1]).tolist(), physicsClientId=cid)
-            seg = p.getCameraImage(
-                rw, rh, view, frustum_matrix(K, win, self.near, self.far), renderer=p.ER_TINY_RENDERER, physicsClientId=cid
-            )[4]
-            mask = np.asarray(seg).reshape(rh, rw) >= 0
+            mask = None
+            hulls = model_hulls(o.model, o.scale) if raster_pixels else None
+            if hulls is not None:
+                rw, rh = _grid(w, h, int(raster_pixels or max_pixels))
+                mask = raster_silhouette(hulls, T_cam_obj, K, win, rw, rh, self.near)
+            if mask is None:
+                rw, rh = _grid(w, h, max_pixels)
+                cid, _ = self._clients.get(o.model, o.scale)
+                view = p.computeViewMatrix(eye.tolist(), (eye + T[:3, 2]).tolist(), (-T[:3, 1]).tolist(), physicsClientId=cid)
+                seg = p.getCameraImage(
+                    rw, rh, view, frustum_matrix(K, win, self.near, self.far), renderer=p.ER_TINY_RENDERER,
+                    physicsClientId=cid,
+                )[4]
+                mask = np.asarray(seg).reshape(rh, rw) >= 0
+                exact = rw * rh == w * h
+            else:
+                exact = False
             # render pixel centres on the image plane: which of them fall inside the frame
             uc = u0 + (np.arange(rw) + 0.5) * (w / rw)
             vc = v0 + (np.arange(rh) + 0.5) * (h / rh)
             rows, cols = (vc >= 0) & (vc < height), (uc >= 0) & (uc < width)
             k = (w * h) / (rw * rh)
             full, inside = np.count_nonzero(mask) * k, np.count_nonzero(mask[np.ix_(rows, cols)]) * k
-            if rw * rh == w * h:
+            if exact:
                 out[oid] = (int(round(full)), int(round(inside)), 0, 0)
                 continue
             # render pixels the outline crosses: silhouette pixels beside background and background beside
@@ -310,19 +344,24 @@ def label_silhouettes(
     *,
     coarse_pixels: int = 2048,
     max_pixels: int = 16384,
+    raster: bool = True,
 ) -> dict[int, tuple[int, int]]:
     """``{object id: (area, area inside the frame)}`` of the objects in ``boxes`` (their visible boxes and
     pixel counts, :func:`~app.training.labels.visible_boxes`) for the label rule ``filt``, at the cost of
-    coarse renders where the answer is clear.
+    coarse measures where the answer is clear.
 
-    Each object is rendered with at most ``coarse_pixels`` first; when its label decision could change
-    anywhere within the coarse areas' error bounds (:meth:`SilhouetteRenderer.measure`), it is rendered
-    again with at most ``max_pixels`` (what :meth:`SilhouetteRenderer.silhouettes` gives), and that count is
-    used. An object whose other tests already fail (too few pixels, too narrow a box) keeps its coarse areas.
+    Each object is measured first: drawn from its convex parts' hulls on at most ``max_pixels`` (``raster``,
+    where its model allows) or rendered with at most ``coarse_pixels``; when its label decision could change
+    anywhere within those areas' error bounds (:meth:`SilhouetteRenderer.measure`), it is rendered again
+    with at most ``max_pixels`` (what :meth:`SilhouetteRenderer.silhouettes` gives), and that count is used.
+    An object whose other tests already fail (too few pixels, too narrow a box) keeps its first areas.
     The label decisions are those of the fine renders; the recorded areas of the others are within their
     bounds (a few per cent)."""
     min_pixels, min_box = filt.scaled(width)
-    coarse = renderer.measure(T_world_camera, K, width, height, list(boxes), max_pixels=min(coarse_pixels, max_pixels))
+    coarse = renderer.measure(
+        T_world_camera, K, width, height, list(boxes), max_pixels=min(coarse_pixels, max_pixels),
+        raster_pixels=max_pixels if raster else None,
+    )
     redo = []
     for oid, (full, inside, e_full, e_inside) in coarse.items():
         x1, y1, x2, y2, n = boxes[oid]

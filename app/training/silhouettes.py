@@ -8,8 +8,9 @@ window of its projected bounding box on the camera's image plane extended past t
 (:func:`silhouette_window`: left, right and bottom; not above the top edge, which cuts every tall object
 seen from the robot's low camera). Occlusion by anything and truncation by the side and bottom edges both
 lower the fraction, with the same rasteriser on both sides of the ratio, so a fully visible object scores
-1.0. :func:`label_silhouettes` renders each object coarsely first and again finely only where the coarse
-count's error could change its label.
+1.0. :func:`label_silhouettes` measures each object cheaply first (drawn from its model's convex parts,
+:mod:`app.training.part_hulls`, or rendered coarsely) and renders it finely only where that measure's error
+could change its label.
 """
 
 from __future__ import annotations

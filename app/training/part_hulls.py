@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.world.models.catalogue import get_model
+from app.world.models.meshes import part_trimesh, rpy_matrix
 from app.world.models.parts import COLLISION_ONLY, Part
 
 __all__ = ["ModelHulls", "model_hulls", "raster_silhouette"]
@@ -38,6 +39,8 @@ CONVEX_VOLUME_TOLERANCE = 0.005
 ROUND_SECTIONS = 24
 #: fixed-point bits of the fill's vertex coordinates (OpenCV's ``shift``): 1/256 render pixel
 _SHIFT = 8
+#: OpenCV fills in 16-bit fixed point: vertices farther out than this (render pixels) would overflow it
+_COORD_LIMIT = float(1 << 14)
 
 
 @dataclass(frozen=True)
@@ -55,8 +58,6 @@ class ModelHulls:
 def _part_points(part: Part, scale: float) -> NDArray[np.float64] | None:
     """The vertices of the part's convex hull in the model frame, or ``None`` if the part is not convex."""
     import trimesh
-
-    from app.world.models.meshes import part_trimesh
 
     d = [v * scale for v in part.dims]
     if part.shape == "mesh":
@@ -82,8 +83,6 @@ def _part_points(part: Part, scale: float) -> NDArray[np.float64] | None:
             local = np.r_[sph + [0.0, 0.0, half], sph - [0.0, 0.0, half]] if half else sph
         else:
             raise ValueError(f"unknown part shape {part.shape!r}")
-    from app.world.models.meshes import rpy_matrix
-
     R = rpy_matrix(part.rpy)
     return local @ R.T + np.asarray(part.pos, dtype=np.float64) * scale
 
@@ -129,8 +128,7 @@ def raster_silhouette(
     # continuous render-grid coordinates; OpenCV's pixel j has its centre at coordinate j
     gx = (K[0, 0] * P[:, 0] / z + K[0, 2] - u0) * (rw / (u1 - u0)) - 0.5
     gy = (K[1, 1] * P[:, 1] / z + K[1, 2] - v0) * (rh / (v1 - v0)) - 0.5
-    lim = float(1 << (30 - _SHIFT))
-    if np.abs(gx).max() >= lim or np.abs(gy).max() >= lim:
+    if np.abs(gx).max() >= _COORD_LIMIT or np.abs(gy).max() >= _COORD_LIMIT:
         return None
     q = np.rint(np.c_[gx, gy] * (1 << _SHIFT)).astype(np.int32)
     mask = np.zeros((rh, rw), dtype=np.uint8)

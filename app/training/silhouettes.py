@@ -277,9 +277,8 @@ class SilhouetteRenderer:
             u0, v0, u1, v1 = win
             w, h = u1 - u0, v1 - v0
             mask = None
-            hulls = model_hulls(o.model, o.scale) if raster_pixels else None
-            if hulls is not None:
-                rw, rh = _grid(w, h, int(raster_pixels or max_pixels))
+            if raster_pixels and (hulls := model_hulls(o.model, o.scale)) is not None:
+                rw, rh = _grid(w, h, int(raster_pixels))
                 mask = raster_silhouette(hulls, T_cam_obj, K, win, rw, rh, self.near)
             if mask is None:
                 rw, rh = _grid(w, h, max_pixels)

@@ -429,6 +429,38 @@ def test_egl_draws_each_scale_of_a_shared_mesh():
     assert np.mean((a == 0) == (b == 0)) > 0.99
 
 
+@pytest.mark.parametrize("renderer", ["tiny", "egl"])
+def test_cached_graphics_flag_leaves_the_images_unchanged(monkeypatch, renderer):
+    """Bodies created with ``URDF_ENABLE_CACHED_GRAPHICS_SHAPES`` (:func:`~app.world.models.bodies.body_flags`)
+    render the same colours, depths and segmentation ids, pixel for pixel, as bodies created without it (it
+    skips the DIRECT server's GUI conversion only). The apartment has every primitive kind (boxes,
+    cylinders, spheres, capsules) and meshes, each part in its own colour."""
+    from app.sim_world import probe_egl
+    from app.world.models import bodies
+
+    if renderer == "egl" and not probe_egl()[0]:
+        pytest.skip("EGL cannot load here")
+    world = load_world("assets/worlds/apartment.yaml")
+    poses = [world.start, world.start @ Pose2(1.5, 0.3, -0.8), world.start @ Pose2(2.5, -0.4, 2.4)]
+
+    def frames() -> list:
+        with SimWorld(world, quiet_config(), seed=0, renderer=renderer) as sim:
+            return [sim.render_view(T, width=160, height=120, segmentation=True, depth=True) for T in poses]
+
+    cached = frames()
+    monkeypatch.setattr(bodies, "body_flags", lambda p: 0)
+    from app.sim import building
+
+    monkeypatch.setattr(building, "body_flags", lambda p: 0)
+    plain = frames()
+    seen = set()
+    for a, b in zip(cached, plain):
+        assert np.array_equal(a.image.data, b.image.data)
+        assert np.array_equal(a.segmentation, b.segmentation) and np.array_equal(a.depth, b.depth)
+        seen |= set(np.unique(a.segmentation).tolist())
+    assert len(seen - {-1}) >= 4  # several objects in view: the comparison covers their parts
+
+
 @pytest.mark.parametrize("world_name", ["apartment", "random_1003"])
 def test_planar_lidar_agrees_with_pybullet_ray_tests(world_name):
     """The 2D cast against the collision shapes' cross-section at the LIDAR height (boxes, mesh hulls,

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.sim.robot_model import RobotModel
-from app.world.models.bodies import build_model_pybullet
+from app.world.models.bodies import body_flags, build_model_pybullet
 from app.world.models.catalogue import get_model
 from app.world.models.colors import resolve_colors
 from app.world.types import World
@@ -78,6 +78,7 @@ def build_bodies(
         p.createCollisionShape(p.GEOM_BOX, halfExtents=[hx, hy, 0.005], physicsClientId=cid),
         p.createVisualShape(p.GEOM_BOX, halfExtents=[hx, hy, 0.005], rgbaColor=[*w.floor_color, 1.0], physicsClientId=cid),
         [cx, cy, -0.005],
+        flags=body_flags(p),
         physicsClientId=cid,
     )
     body_info[floor] = ("floor", 0, "floor")
@@ -109,7 +110,7 @@ def build_bodies(
             vis = p.createVisualShape(
                 p.GEOM_CYLINDER, radius=o.radius, length=o.height, rgbaColor=[*(o.color or (0.6, 0.6, 0.6)), 1.0], physicsClientId=cid
             )
-            ids.append(p.createMultiBody(0.0, col, vis, [o.x, o.y, o.z + o.height / 2], physicsClientId=cid))
+            ids.append(p.createMultiBody(0.0, col, vis, [o.x, o.y, o.z + o.height / 2], flags=body_flags(p), physicsClientId=cid))
         else:
             spec = get_model(o.model)
             built = build_model_pybullet(cid, o.model, o.x, o.y, o.yaw, z=o.z, scale=o.scale, colors=resolve_colors(spec, o.color), mesh_file=mf)
@@ -141,7 +142,7 @@ def build_bodies(
         str(rm.urdf_path),
         [0, 0, 0],
         useFixedBase=True,
-        flags=p.URDF_USE_IMPLICIT_CYLINDER,
+        flags=p.URDF_USE_IMPLICIT_CYLINDER | body_flags(p),
         physicsClientId=cid,
     )
     robot_inertial_offset = np.asarray(p.getDynamicsInfo(robot_body, -1, physicsClientId=cid)[3])
@@ -155,7 +156,7 @@ def build_bodies(
     h = float(config.sim.robot_height_m)
     probe_z = (0.012 + h) / 2  # from 12 mm above the floor (rugs, cables) to the robot's top
     probe_col = p.createCollisionShape(p.GEOM_CYLINDER, radius=robot_radius, height=h - 0.012, physicsClientId=cid)
-    probe = p.createMultiBody(0.0, probe_col, -1, list(FAR_AWAY), physicsClientId=cid)
+    probe = p.createMultiBody(0.0, probe_col, -1, list(FAR_AWAY), flags=body_flags(p), physicsClientId=cid)
     p.setCollisionFilterGroupMask(probe, -1, G_CHECK, 0, physicsClientId=cid)
     return Bodies(
         floor_body=floor,
@@ -178,5 +179,5 @@ def _static_box(p: Any, cid: int, he: Sequence[float], pos: Sequence[float], yaw
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(he), physicsClientId=cid)
     vis = p.createVisualShape(p.GEOM_BOX, halfExtents=list(he), rgbaColor=[*color[:3], 1.0], physicsClientId=cid)
     q = p.getQuaternionFromEuler([0.0, 0.0, yaw])
-    return p.createMultiBody(0.0, col, vis, list(pos), q, physicsClientId=cid)
+    return p.createMultiBody(0.0, col, vis, list(pos), q, flags=body_flags(p), physicsClientId=cid)
 

@@ -20,6 +20,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from app.world.models.bodies import body_flags
+
 __all__ = ["TEXTURE_KINDS", "Randomizer", "make_texture", "sensor_effects", "urdf_mesh_box"]
 
 
@@ -228,7 +230,7 @@ class Randomizer:
         (self.tmpdir / f"overlay{k}.mtl").write_text(f"newmtl m\nKd 1 1 1\nmap_Kd tex{k}.png\n")
         obj = write_mesh_obj(mesh, self.tmpdir / f"overlay{k}.obj", material=f"overlay{k}.mtl")
         vs = p.createVisualShape(p.GEOM_MESH, fileName=str(obj), physicsClientId=cid)
-        return p.createMultiBody(0, -1, vs, [0, 0, 0], physicsClientId=cid)
+        return p.createMultiBody(0, -1, vs, [0, 0, 0], flags=body_flags(p), physicsClientId=cid)
 
     # -- scene -------------------------------------------------------------------------------
     def randomize_scene(self) -> None:
@@ -292,7 +294,9 @@ class Randomizer:
                     continue  # loading it would turn it down too
             q = p.getQuaternionFromEuler([0, 0, yaw])
             try:
-                b = p.loadURDF(str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, physicsClientId=cid)
+                b = p.loadURDF(
+                    str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, flags=body_flags(p), physicsClientId=cid
+                )
             except Exception:
                 continue
             lo, hi = p.getAABB(b, -1, physicsClientId=cid)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,20 @@ from app.world.models.colors import resolve_colors
 from app.world.models.meshes import mesh_path
 from app.world.models.parts import COLLISION_ONLY, RGB
 
-__all__ = ["build_model_pybullet"]
+__all__ = ["build_model_pybullet", "body_flags"]
+
+
+def body_flags(p: Any) -> int:
+    """The ``flags`` for every body this project creates in pybullet module ``p`` (``createMultiBody``,
+    ``loadURDF``): ``URDF_ENABLE_CACHED_GRAPHICS_SHAPES``.
+
+    pybullet converts each new body's visual shapes twice: for the renderer that draws the camera images
+    (TinyRenderer or the EGL plugin) and for the physics server's own GUI. Our clients are DIRECT, with no GUI,
+    so the second conversion (tessellating every cylinder, sphere and capsule: 0.3–0.5 ms a body) builds
+    nothing; with this flag the server reuses the first body's (empty) result for the bodies after it. The
+    renderer's conversion, and so every image and segmentation mask, is unchanged
+    (``tests/test_sim_world.py::test_cached_graphics_flag_leaves_the_images_unchanged``)."""
+    return int(p.URDF_ENABLE_CACHED_GRAPHICS_SHAPES)
 
 
 def _quat_mul(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float, float]:
@@ -60,6 +74,7 @@ def build_model_pybullet(
     q_yaw = p.getQuaternionFromEuler([0.0, 0.0, yaw])
     c, s = math.cos(yaw), math.sin(yaw)
     out: list[tuple[int, str]] = []
+    flags = body_flags(p)
     for part in spec.parts:
         d = [v * scale for v in part.dims]
         collision_only = part.role == COLLISION_ONLY
@@ -110,6 +125,7 @@ def build_model_pybullet(
             baseVisualShapeIndex=vis,
             basePosition=[wx, wy, z + pz],
             baseOrientation=q,
+            flags=flags,
             physicsClientId=client,
         )
         out.append((body, part.role))

@@ -98,3 +98,28 @@ def test_string_pulling_keeps_the_reference_points(seed, n, chunk):
     steps = rng.choice([-0.1, 0.0, 0.1], size=(n, 2))
     pts = [tuple(p) for p in np.round(np.cumsum(steps, axis=0) + [3.0, 2.0], 3)]
     assert planner.pull_string(pts, chunk=chunk) == _reference_pull(planner, pts)
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 10_000), family=st.sampled_from(["rooms", "corridor", "lshape", "openplan"]),
+       res=st.sampled_from([0.05, 0.1]))
+def test_the_distance_grid_is_geos_distance_up_to_its_cap(seed, family, res):
+    """A random world of each family: every cell's value is GEOS's distance from its centre to the blocking
+    geometry where that is within the cap (and the planner's masks follow from those), ``inf`` only beyond it."""
+    import shapely
+
+    from app.world.generator import random_world
+    from app.world.planner import Planner
+
+    world = random_world(seed, family=family)
+    planner = Planner(world, clearance=0.175, preferred=0.35, res=res)
+    jj, ii = np.meshgrid(np.arange(planner.W), np.arange(planner.H))
+    pts = np.c_[planner.x0 + (jj.ravel() + 0.5) * res, planner.y0 + (ii.ravel() + 0.5) * res]
+    full = shapely.distance(planner.blocking, shapely.points(pts)).reshape(planner.H, planner.W)
+    near = full <= planner.dist_cap
+    assert np.array_equal(planner.dist[near], full[near])
+    far = ~np.isfinite(planner.dist)
+    assert np.all(full[far] > planner.dist_cap) and np.all(np.isfinite(planner.dist[near]))
+    assert 0 < np.count_nonzero(far) < far.size  # the cut is exercised: cells on both sides of it
+    assert np.array_equal(planner.free, full >= planner.clearance + res * 0.75)
+    assert np.array_equal(planner.cost, np.where(full >= planner.preferred, 1.0, 4.0))

@@ -547,6 +547,13 @@ class ConsciousnessConfig:
         "against a wall seen from the side) or kept to its points",
         live=True,
     )
+    legs_seen_free: bool = param(
+        True,
+        help="improved, footprints: an object that may stand on a pedestal (a table), completed from one leg-sized "
+        "support, is centred on that support when the map saw free space where two of its other legs would stand "
+        "(a round table's pedestal seen off its boxes' centre lines, not a corner leg of a table behind it)",
+        live=True,
+    )
     wide_box_fraction: float = param(
         0.85, min=0.0, max=1.0, step=0.05,
         help="improved: a box at least this share of the image wide makes no new object, it only sees one made before: "

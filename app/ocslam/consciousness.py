@@ -296,7 +296,7 @@ class Consciousness:
             robot_moved = lp is None or lp.distance(T_map_base) > 1e-4 or abs(float(angle_wrap(lp.yaw - T_map_base.yaw))) > 1e-4
         self._last_pose = T_map_base
         self._stamp = stamp
-        self._known_free = grid_free_fn(grid, cfg.hidden_behind_own_face) if cfg.corner_check else None
+        self._known_free = grid_free_fn(grid, cfg.hidden_behind_own_face, cfg.legs_seen_free) if cfg.corner_check else None
         if self._moved:
             if self._known_free is not None:
                 for track in self._tracks:

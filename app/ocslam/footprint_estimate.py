@@ -94,6 +94,34 @@ def depth_for_width(width: float, pc: ClassPrior, legs: bool = False) -> tuple[f
 FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
 
 
+def _centred(center: FloatArray, th: float, d_obs: FloatArray, pc: ClassPrior, w_app: float) -> Footprint:
+    """The footprint centred on the points: the class's first shape, or a disc as wide as the boxes (``w_app``,
+    when finite) for a central support, never smaller than the points' extents ``d_obs`` (rectangle axes)."""
+    a, b = pc.shapes[0] if pc.shapes else (pc.length[1], pc.width[1])
+    if np.isfinite(w_app):
+        a = b = float(np.clip(w_app, pc.width[0], pc.length[2]))
+    first = d_obs[0] >= d_obs[1]
+    return Footprint(center, th, float(max(d_obs[0], a if first else b)), float(max(d_obs[1], b if first else a)))
+
+
+def _legs_seen_free(known_free: FreeFn, fp: Footprint, pts: FloatArray, leg: float) -> bool:
+    """True if the grid knows free space at two of the footprint's corners that lie farther than ``leg`` from
+    every point, where a legged object's other legs would stand (each corner inset by 8 cm, with its four
+    neighbours 5 cm away: all five free)."""
+    c, s = math.cos(fp.yaw), math.sin(fp.yaw)
+    ax, ay = np.array([c, s]), np.array([-s, c])
+    hx, hy = max(fp.size_x / 2 - 0.08, 0.0), max(fp.size_y / 2 - 0.08, 0.0)
+    corners = np.array([fp.center + sx * hx * ax + sy * hy * ay for sx in (-1, 1) for sy in (-1, 1)])
+    far = nearest_distances(corners, pts) > leg
+    n_far = int(np.count_nonzero(far))
+    if n_far < 2:
+        return False
+    offs = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
+    samples = (corners[far][:, None, :] + offs[None, :, :]).reshape(-1, 2)
+    free = np.asarray(known_free(samples)).reshape(n_far, len(offs)).all(axis=1)
+    return int(np.count_nonzero(free)) >= 2
+
+
 def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], float, FloatArray, FloatArray]:
     """``(points, hits, theta, lo, hi)``: the evidence's points without strays and their rectangle
     (:func:`min_area_rect`), read-only. Kept on the evidence until its points change (a new ``points``
@@ -166,7 +194,9 @@ def estimate_footprint(
     are, except that a single face (a line of points) still gets its depth (step 3).
 
     A legged object seen as one small support on the box's centre line (a pedestal table) keeps its
-    centre on that support. ``known_free`` (``(N, 2)`` points → ``(N,)`` True where the occupancy grid
+    centre on that support; so does one completed from a single support when the grid knows free space where
+    two of its other legs would stand (``known_free.legs_free``, ``consciousness.legs_seen_free``, classes
+    that may stand on a pedestal). ``known_free`` (``(N, 2)`` points → ``(N,)`` True where the occupancy grid
     knows free space) vetoes an extension into space the LIDAR has seen empty: the points were then the
     object's far side (an open shelf seen from inside).
 
@@ -256,11 +286,7 @@ def estimate_footprint(
     )
     if depth_axis < 0 or support:
         # no viewpoint (or a central support): the points are the object's centre
-        a, b = pc.shapes[0] if pc.shapes else (L[1], W[1])
-        if support and np.isfinite(w_app):
-            a = b = float(np.clip(w_app, W[0], L[2]))
-        size = np.array([max(d_obs[0], a if d_obs[0] >= d_obs[1] else b), max(d_obs[1], b if d_obs[0] >= d_obs[1] else a)])
-        return Footprint(center0, th, float(size[0]), float(size[1]))
+        return _centred(center0, th, d_obs, pc, w_app if support else float("nan"))
 
     # tangential extent: the observed one if it covers the box's apparent width, else the apparent width
     tan_complete = cut_only or (np.isfinite(w_app) and d_obs[tan_axis] >= 0.75 * w_app)
@@ -342,6 +368,14 @@ def estimate_footprint(
             size[i] = max(size[i], 2.0 * max(s_opt[i] - lo[i], hi[i] - s_opt[i]))
     center = axes.T @ s_opt
     fp = Footprint(center, th, float(size[0]), float(size[1]))
+    if (
+        known_free is not None and pc.pedestal and getattr(known_free, "legs_free", False)
+        and max(d_obs) <= pc.leg_size_max * 1.5 and min(fp.size_x, fp.size_y) >= pc.width[0]
+        and _legs_seen_free(known_free, fp, pts, pc.leg_size_max)
+    ):
+        # one support, and where the legs of the object completed from it would stand the LIDAR saw free space:
+        # that support is its centre (a pedestal seen off its boxes' centre lines), not one of its legs
+        return _centred(center0, th, d_obs, pc, w_app)
     occupied = getattr(known_free, "occupied", None)
     if occupied is None or depth_axis_hint is not None:
         return fp

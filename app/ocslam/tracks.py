@@ -189,9 +189,12 @@ class GridSpace:
     it knows the cell is not free (occupancy ≥ :data:`FREE_BELOW`; the sweep's compact grids keep exactly this
     split), which footprints ask for known obstacles (principle 20; ``None`` when it is switched off)."""
 
-    def __init__(self, grid: OccupancyGrid, occupied: bool = True) -> None:
+    def __init__(self, grid: OccupancyGrid, occupied: bool = True, legs_free: bool = False) -> None:
         self._grid = grid
         self.occupied: Callable[[FloatArray], NDArray[np.bool_]] | None = self._not_free if occupied else None
+        #: footprints may ask it whether the legs of an object completed from one support stand in known free
+        #: space (``consciousness.legs_seen_free``)
+        self.legs_free = legs_free
 
     def _values(self, points: FloatArray) -> NDArray[np.int64]:
         """``(N,)`` cell values, −1 (unknown) outside the grid."""
@@ -213,12 +216,13 @@ class GridSpace:
         return self._values(points) >= FREE_BELOW
 
 
-def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True) -> GridSpace | None:
+def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True, legs_free: bool = False) -> GridSpace | None:
     """A :class:`GridSpace` of ``grid`` (``None`` without a usable grid); ``occupied``: whether footprints
-    may ask it for known obstacles (``consciousness.hidden_behind_own_face``)."""
+    may ask it for known obstacles (``consciousness.hidden_behind_own_face``); ``legs_free``: whether for free
+    space where legs would stand (``consciousness.legs_seen_free``)."""
     if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
         return None
-    return GridSpace(grid, occupied)
+    return GridSpace(grid, occupied, legs_free)
 
 
 def along_ray_close(origin: FloatArray, a: FloatArray, b: FloatArray, thr: float, rel: float = 0.25) -> bool:

@@ -142,7 +142,7 @@ def build_bodies(
         str(rm.urdf_path),
         [0, 0, 0],
         useFixedBase=True,
-        flags=p.URDF_USE_IMPLICIT_CYLINDER | body_flags(p),
+        flags=p.URDF_USE_IMPLICIT_CYLINDER,
         physicsClientId=cid,
     )
     robot_inertial_offset = np.asarray(p.getDynamicsInfo(robot_body, -1, physicsClientId=cid)[3])

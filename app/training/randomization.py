@@ -294,7 +294,9 @@ class Randomizer:
                     continue  # loading it would turn it down too
             q = p.getQuaternionFromEuler([0, 0, yaw])
             try:
-                b = p.loadURDF(str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, physicsClientId=cid)
+                b = p.loadURDF(
+                    str(urdf), [x, y, 0.0], q, globalScaling=scale, useFixedBase=True, flags=body_flags(p), physicsClientId=cid
+                )
             except Exception:
                 continue
             lo, hi = p.getAABB(b, -1, physicsClientId=cid)

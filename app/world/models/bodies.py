@@ -24,9 +24,8 @@ __all__ = ["build_model_pybullet", "body_flags"]
 
 
 def body_flags(p: Any) -> int:
-    """The ``flags`` for every body this project creates in pybullet module ``p`` with ``createMultiBody``:
-    ``URDF_ENABLE_CACHED_GRAPHICS_SHAPES``. (``loadURDF`` keeps its own: there the cache is kept per file, and a
-    file loaded again at another scale is better left to convert anew.)
+    """The ``flags`` for the bodies this project creates in pybullet module ``p`` (``createMultiBody``, and
+    ``loadURDF`` for the dataset's distractors): ``URDF_ENABLE_CACHED_GRAPHICS_SHAPES``.
 
     pybullet converts each new body's visual shapes twice: for the renderer that draws the camera images
     (TinyRenderer or the EGL plugin) and for the physics server's own GUI. Our clients are DIRECT, with no GUI,

@@ -435,6 +435,7 @@ def test_cached_graphics_flag_leaves_the_images_unchanged(monkeypatch, renderer)
     render the same colours, depths and segmentation ids, pixel for pixel, as bodies created without it (it
     skips the DIRECT server's GUI conversion only). The apartment has every primitive kind (boxes,
     cylinders, spheres, capsules) and meshes, each part in its own colour."""
+    from app.sim import building
     from app.sim_world import probe_egl
     from app.world.models import bodies
 
@@ -449,8 +450,6 @@ def test_cached_graphics_flag_leaves_the_images_unchanged(monkeypatch, renderer)
 
     cached = frames()
     monkeypatch.setattr(bodies, "body_flags", lambda p: 0)
-    from app.sim import building
-
     monkeypatch.setattr(building, "body_flags", lambda p: 0)
     plain = frames()
     seen = set()

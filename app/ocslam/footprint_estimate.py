@@ -108,10 +108,7 @@ def _legs_seen_free(known_free: FreeFn, fp: Footprint, pts: FloatArray, leg: flo
     """True if the grid knows free space at two of the footprint's corners that lie farther than ``leg`` from
     every point, where a legged object's other legs would stand (each corner inset by 8 cm, with its four
     neighbours 5 cm away: all five free)."""
-    c, s = math.cos(fp.yaw), math.sin(fp.yaw)
-    ax, ay = np.array([c, s]), np.array([-s, c])
-    hx, hy = max(fp.size_x / 2 - 0.08, 0.0), max(fp.size_y / 2 - 0.08, 0.0)
-    corners = np.array([fp.center + sx * hx * ax + sy * hy * ay for sx in (-1, 1) for sy in (-1, 1)])
+    corners = Footprint(fp.center, fp.yaw, max(fp.size_x - 0.16, 0.0), max(fp.size_y - 0.16, 0.0)).corners
     far = nearest_distances(corners, pts) > leg
     n_far = int(np.count_nonzero(far))
     if n_far < 2:

@@ -101,12 +101,12 @@ class Planner:
         self.clearance, self.preferred = clearance, preferred
         #: the distance grid is exact up to this (m), every threshold the planner and the tour check compare it with
         self.dist_cap = max(preferred, clearance + 0.1, clearance + res)
-        self.dist = self._distance_grid(xmin, ymin)
+        self.dist = self._distance_grid()
         # a margin of one cell so straight lines between neighbouring cell centres keep the clearance
         self.free = self.dist >= clearance + res * 0.75
         self.cost = np.where(self.dist >= preferred, 1.0, 4.0)
 
-    def _distance_grid(self, xmin: float, ymin: float) -> NDArray[np.float64]:
+    def _distance_grid(self) -> NDArray[np.float64]:
         """``(H, W)`` distance (m) from each cell centre to the blocking geometry: exact (GEOS's) up to
         :attr:`dist_cap`; ``inf`` for the cells surely farther (outside the geometry grown by the cap and 5 cm,
         which covers the grown polygon's chords of its round corners, < 1 mm at these radii); 0 inside it.
@@ -115,7 +115,7 @@ class Planner:
         every comparison with a threshold up to the cap gives what the full grid gave."""
         res = self.res
         jj, ii = np.meshgrid(np.arange(self.W), np.arange(self.H))
-        x, y = xmin + (jj.ravel() + 0.5) * res, ymin + (ii.ravel() + 0.5) * res
+        x, y = self.x0 + (jj.ravel() + 0.5) * res, self.y0 + (ii.ravel() + 0.5) * res
         shapely.prepare(self.blocking)
         zone = self.blocking.buffer(self.dist_cap + 0.05)
         shapely.prepare(zone)

@@ -56,7 +56,7 @@ def _square(cx: float, cy: float, half: float = 0.015) -> np.ndarray:
     return np.array([[cx + dx, cy + dy] for dx in (-half, half) for dy in (-half, half)])
 
 
-def _collide(tracks, **cfg):
+def _collide(tracks, known_free=None, **cfg):
     from shapely.geometry import Polygon
 
     from app.ocslam.candidate import FrameReport
@@ -68,7 +68,7 @@ def _collide(tracks, **cfg):
     for k, v in cfg.items():
         setattr(c, k, v)
     rep = FrameReport(3.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon())
-    return resolve_track_collisions(list(tracks), list(tracks), 3.0, c, None, rep)
+    return resolve_track_collisions(list(tracks), list(tracks), 3.0, c, known_free, rep)
 
 
 @pytest.mark.parametrize("overlap", [False, True])
@@ -219,3 +219,57 @@ def test_a_pedestal_keeps_its_support_from_a_track_that_took_it_with_a_stool():
     assert np.allclose(np.sort(kept[0].evidence.points, axis=0), np.sort(ped, axis=0))
     bp = kept[1].evidence.points
     assert np.min(np.hypot(bp[:, 0] - 3.4, bp[:, 1] - 0.9)) > 0.1 and len(bp) == len(stools)
+
+
+def _floor(free: bool) -> GridSpace:  # noqa: F821
+    """A 6 m × 6 m map from (-1, -1): every cell seen free (``free``) or never seen."""
+    from app.ocslam.messages import OccupancyGrid
+    from app.ocslam.se2 import Pose2
+    from app.ocslam.tracks import GridSpace
+
+    return GridSpace(OccupancyGrid(0.05, Pose2(-1.0, -1.0, 0.0), np.full((120, 120), 0 if free else -1, dtype=np.int8)))
+
+
+def test_gap_seen_free_known_answers():
+    """Free floor between two point sets over more than the class's free span (+ 0.15 m) parts them: a chair's legs
+    span 0.6 m, a table's 2.3 m, a gnome is solid, a bookcase's open frame 1.5 m; unknown cells (under a solid
+    body) or no grid part nothing."""
+    from app.ocslam.classes import prior
+    from app.ocslam.tracks import gap_seen_free
+
+    a = np.stack([np.linspace(0.0, 0.6, 13), np.zeros(13)], axis=1)
+    for gap, label, want in ((1.8, "chair", True), (0.9, "chair", False), (1.8, "table", False), (2.9, "table", True),
+                             (0.5, "gnome", True), (0.3, "gnome", False), (1.6, "shelf", False), (1.9, "shelf", True)):
+        b = a + np.array([0.6 + gap, 0.0])
+        assert gap_seen_free(a, b, prior(label), _floor(True)) is want, (gap, label)
+        assert gap_seen_free(b, a, prior(label), _floor(True)) is want, (gap, label)
+        assert gap_seen_free(a, b, prior(label), _floor(False)) is False
+        assert gap_seen_free(a, b, prior(label), None) is False
+    # a wall of occupied cells across the gap breaks the free run in two short ones
+    grid = _floor(True)
+    grid._grid.data[:, 20 + 26] = 100  # x = 1.3 m
+    b = a + np.array([0.6 + 1.4, 0.0])
+    assert gap_seen_free(a, b, prior("chair"), grid) is False
+
+
+def test_pieces_of_one_sofa_seen_apart_across_free_floor_stay_two():
+    """A sofa-like chair face 0.9 m long and a piece 1.0 m along its line, each seen only through border-cut boxes
+    (fragments) and each completed into an armchair-sized footprint behind it: together they fit a 2.2 m sofa, so
+    they merge while nothing is known of the floor between them, and stay two chairs once the map saw that floor
+    free — more than a dining chair's legs span (``gap_seen_free``)."""
+    from app.ocslam.footprint import Footprint
+
+    face = np.stack([np.linspace(0.0, 0.9, 19), np.full(19, 1.0)], axis=1)
+    piece = np.stack([np.linspace(1.9, 2.2, 7), np.full(7, 1.0)], axis=1)
+
+    def pair():
+        a = _track(0, face, 4, {1.0: (0, (200.0, 320.0))}, label="chair")
+        b = _track(1, piece, 4, {2.0: (0, (0.0, 60.0))}, label="chair")
+        for t, x in ((a, 0.45), (b, 2.05)):
+            t.complete_views = 0
+            t.footprint = Footprint(np.array([x, 1.5]), 0.0, 1.1, 1.0)
+        return a, b
+
+    assert len(_collide(pair(), known_free=_floor(False))) == 1
+    assert len(_collide(pair(), known_free=_floor(True))) == 2
+    assert len(_collide(pair(), known_free=_floor(True), gap_seen_free=False)) == 1

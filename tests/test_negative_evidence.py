@@ -209,6 +209,30 @@ def test_a_partial_view_does_not_continue_an_object_beyond_its_boxs_closed_edge(
     assert associate(cand, [track], 1.0, cfg) is None
 
 
+def test_a_partial_view_does_not_continue_an_object_across_floor_seen_free():
+    """The same armchair and desk chair, the desk chair's box cut by the border on the far side (no closed edge on
+    the armchair's side): one sofa-sized chair could hold both, and nothing else tells them apart, until the map has
+    seen the floor between them free — 1.35 m of it, more than a chair's legs span (``gap_seen_free``)."""
+    from app.ocslam.messages import OccupancyGrid
+    from app.ocslam.tracks import GridSpace
+
+    cfg = ConsciousnessConfig()
+    arm = np.array([[x, y] for x in np.linspace(2.1, 3.1, 11) for y in (1.7, 1.9)])
+    desk = np.array([[2.4, 0.0], [2.8, 0.0], [2.4, 0.35], [2.8, 0.35]])
+    robot = np.array([1.1, 1.0])
+    cand = Candidate(1, "chair", 0.9, "lidar_legs", desk, None, 1.5, ray_origin=robot, ray_weight=0.0, open_side=-1,
+                     ray_dir=np.array([1.0, -0.4]))
+
+    def floor(value: int) -> GridSpace:
+        return GridSpace(OccupancyGrid(0.05, Pose2(0.0, -1.0, 0.0), np.full((80, 100), value, dtype=np.int8)))
+
+    track = _island_track(arm)
+    assert associate(cand, [track], 1.0, cfg, floor(-1)) is track  # nothing known of the floor between them
+    assert associate(cand, [track], 1.0, cfg, floor(0)) is None  # seen free: two chairs
+    cfg.gap_seen_free = False
+    assert associate(cand, [track], 1.0, cfg, floor(0)) is track
+
+
 def _legs(cx: float, cy: float, half: float = 0.19) -> np.ndarray:
     """Points of four chair legs (3 cm squares of 4 points) at the corners of a square around (cx, cy)."""
     out = []

@@ -17,17 +17,29 @@ from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.projection import BoundingArea
 from app.ocslam.se2 import Pose2
-from app.ocslam.tracks import Sighting, Track, along_ray_close, angle_wrap, contiguous, min_distance
+from app.ocslam.tracks import (
+    FreeFn,
+    Sighting,
+    Track,
+    along_ray_close,
+    angle_wrap,
+    contiguous,
+    gap_seen_free,
+    min_distance,
+)
 
 
-def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: ConsciousnessConfig) -> Track | None:
+def associate(
+    cand: Candidate, tracks: list[Track], stamp: float, cfg: ConsciousnessConfig, known_free: FreeFn | None = None
+) -> Track | None:
     """The tracked object of the candidate's class it is (paper's assumption 5), or ``None``.
 
     Nearest centre within ``tracking_threshold_m``, or the object's footprint (grown by half the
     threshold) holding the candidate's centre — when both have LIDAR points, only if some of them lie
     within half the threshold of each other — or half its points, or the candidate's footprint
     holding the object's centre; ground-plane placements along the line of sight; partial views
-    that continue the object's points. Never an object another box of this frame already updated."""
+    that continue the object's points — unless the map saw free floor between them (``known_free``,
+    ``consciousness.gap_seen_free``). Never an object another box of this frame already updated."""
     thr = float(cfg.tracking_threshold_m)
     best, best_d = None, math.inf
     c = cand.center
@@ -59,6 +71,8 @@ def associate(cand: Candidate, tracks: list[Track], stamp: float, cfg: Conscious
             match = closed_ok and contiguous(
                 cand.points, t.evidence.points, t.prior, t.prior.length[2], typical=True
             )
+            if match and cfg.gap_seen_free and gap_seen_free(cand.points, t.evidence.points, t.prior, known_free):
+                match = False  # free floor seen between them: two objects (an armchair and a sofa's face)
             if match:
                 d = thr + float(min_distance(cand.points, t.evidence.points))
         if match and d < best_d:

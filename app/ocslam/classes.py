@@ -20,6 +20,8 @@ beams (a door blocks all of it, a potted plant only its pot): used by the see-th
 ``on_wall``: the object sits in a wall (doors), so its island legitimately continues into the wall.
 ``pedestal``: some instances stand on one central support much smaller than the object (a round table's
 column), so a lone small island on the box's centre line may be all the LIDAR ever sees of it.
+``open_span``: the floor the LIDAR may see free inside one instance (an open bookcase's frame, a door's jambs), beyond
+the span of a legged class's legs; any wider stretch seen free between two point sets parts them into two objects.
 ``top_at_front``: the object's highest point stands above its nearest face (a bookcase's front top edge): a box's
 top row shows it at the range of the object's front, not farther back (a chair's back, a person's head).
 """
@@ -55,6 +57,9 @@ class ClassPrior:
     #: largest island one instance can give at LIDAR height (m, bounding-box diagonal; inf: no limit).
     #: Classes that are legs at that height (tables, dogs, people) never give a wall-sized island.
     max_island: float = float("inf")
+    #: largest stretch of floor the LIDAR may see free inside one instance (m): between a bookcase's side panels,
+    #: a door's jambs; ``None``: the legs' largest span for a legged class, else 0 (a solid cross-section)
+    open_span: float | None = None
 
     def __post_init__(self) -> None:
         for key in ("length", "width", "height"):
@@ -69,6 +74,14 @@ class ClassPrior:
             object.__setattr__(self, "leg_span", (self.length[2], self.width[2]))
         if self.legged and not self.leg_shapes:
             object.__setattr__(self, "leg_shapes", self.shapes)
+
+    @property
+    def free_span(self) -> float:
+        """Largest stretch of floor seen free inside one instance (m): ``open_span``, else the legs' largest span
+        for a legged class, else 0."""
+        if self.open_span is not None:
+            return float(self.open_span)
+        return float(self.leg_span[0]) if self.legged and self.leg_span is not None else 0.0
 
     def fits_typical(self, extent_a: float, extent_b: float, tolerance: float = 0.2) -> bool:
         """True if a footprint with these extents fits inside one of the typical shapes (scaled by 1 + tol)."""
@@ -138,7 +151,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ),
         ClassPrior(
             "door", (0.6, 1.0, 1.3), (0.02, 0.3, 0.45), (1.6, 2.1, 2.6), solid_fraction=0.6, on_wall=True,
-            top_at_front=True, shapes=((1.0, 0.3),),
+            top_at_front=True, shapes=((1.0, 0.3),), open_span=1.3,
         ),
         ClassPrior("duck", (0.05, 0.11, 0.2), (0.04, 0.075, 0.16), (0.05, 0.1, 0.16)),
         ClassPrior(
@@ -149,7 +162,7 @@ CLASS_PRIORS: dict[str, ClassPrior] = {
         ClassPrior("flowers", (0.12, 0.25, 0.7), (0.12, 0.19, 0.7), (0.35, 0.99, 1.4), solid_fraction=0.1),
         ClassPrior(
             "shelf", (0.6, 1.0, 1.5), (0.25, 0.4, 0.7), (0.9, 2.3, 2.9), solid_fraction=0.5, top_at_front=True,
-            shapes=((1.0, 0.4), (1.2, 0.35)),
+            shapes=((1.0, 0.4), (1.2, 0.35)), open_span=1.5,
         ),
     )
 }

@@ -26,6 +26,7 @@ from app.ocslam.tracks import (
     co_observed,
     contiguous,
     fits_instance,
+    gap_seen_free,
     merge_tracks,
     overlap_fraction,
     pedestal,
@@ -389,6 +390,8 @@ def resolve_track_collisions(
                     # instance with its neighbour: the neighbour's own points may overstate its shape
                     typical = not (cfg.fragment_fits_largest and fragment)
                     same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=typical)
+                    if same and cfg.gap_seen_free and gap_seen_free(a.evidence.points, b.evidence.points, a.prior, known_free):
+                        same = False  # the map saw free floor between them: two objects
                 if not same and (not a.evidence.has_points or not b.evidence.has_points):
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)
                     if len(gp.evidence.ray_origin):

@@ -554,6 +554,13 @@ class ConsciousnessConfig:
         "(a round table's pedestal seen off its boxes' centre lines, not a corner leg of a table behind it)",
         live=True,
     )
+    gap_seen_free: bool = param(
+        True,
+        help="improved, association and merges: two point sets joined across a gap (pieces of one object glimpsed "
+        "through border-cut boxes) are one object only if the map has not seen free floor between them over more "
+        "than the class's leg span (an armchair and a sofa face 1.8 m apart are two chairs, not one sofa)",
+        live=True,
+    )
     wide_box_fraction: float = param(
         0.85, min=0.0, max=1.0, step=0.05,
         help="improved: a box at least this share of the image wide makes no new object, it only sees one made before: "

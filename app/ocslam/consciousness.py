@@ -375,7 +375,7 @@ class Consciousness:
         for cand in candidates:
             if cand is None or cand.status == "collision":
                 continue
-            t = associate(cand, self._tracks, self._stamp, cfg)
+            t = associate(cand, self._tracks, self._stamp, cfg, self._known_free)
             if t is None and wide_box(cand.box_cols, float(cam.info.width), float(cfg.wide_box_fraction)):
                 rep.reject("wide_box_new")  # confirms an object seen before, makes none
                 continue

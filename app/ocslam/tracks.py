@@ -179,6 +179,34 @@ def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typic
     return fits_instance(pc, float(d[0]), float(d[1]), typical)
 
 
+def gap_seen_free(a: FloatArray, b: FloatArray, pc: ClassPrior, known_free: FreeFn | None, step: float = 0.025) -> bool:
+    """True if the map saw free floor between two point sets ``(N, 2)`` / ``(M, 2)`` (map frame) over more than
+    one instance of the class can leave free inside itself: along the segment joining their closest points, a run
+    of known-free samples (``step`` apart, 0.1 m from either end left out) longer than the class's
+    :attr:`~app.ocslam.classes.ClassPrior.free_span` (its legs' span, an open frame's width; 0 for a solid
+    cross-section) by 0.15 m. A solid body between two of its faces blocks the LIDAR. False without a grid."""
+    if known_free is None or len(a) == 0 or len(b) == 0:
+        return False
+    if len(a) > len(b):
+        a, b = b, a
+    d = nearest_distances(a, b)
+    i = int(np.argmin(d))
+    p = a[i]
+    q = b[int(np.argmin(np.hypot(b[:, 0] - p[0], b[:, 1] - p[1])))]
+    allowed = pc.free_span + 0.15
+    gap = float(d[i])
+    if gap - 0.2 <= allowed:
+        return False
+    s = np.arange(0.1, gap - 0.1 + 1e-9, step)
+    pts = p[None, :] + (q - p)[None, :] * (s / gap)[:, None]
+    free = np.asarray(known_free(pts), dtype=bool)
+    # longest run of consecutive free samples, in metres
+    padded = np.concatenate([[0], free.astype(np.int8), [0]])
+    edges = np.flatnonzero(np.diff(padded))
+    runs = edges[1::2] - edges[0::2]
+    return bool(len(runs)) and float(runs.max()) * step > allowed
+
+
 #: occupancy below this (and known) is free space; at or above it the cell is not free
 FREE_BELOW = 20
 

@@ -233,3 +233,21 @@ def test_a_box_as_wide_as_the_image_makes_no_object_but_sees_one(fraction: float
     run(c, [shelf], [("shelf", shelf)], straight(20, 0.0, 0.0, 2.1, 0.0) + close)
     shelves = found(c, "shelf")
     assert len(shelves) == 1 and near(shelves, 3.0, 0.0, 0.3)
+
+
+@pytest.mark.parametrize("whole_only", [True, False])
+def test_a_fragment_is_not_confirmed_by_boxes_that_fill_the_view(whole_only: bool):
+    """A 1.2 m surface 1 m away (a counter the detector takes for a bookcase), glimpsed in two frames through boxes cut
+    by the image's left border while the robot turns towards it, then filling the view: the cut boxes make a fragment,
+    and boxes as wide as the image show no more of it than a wall would. With ``wide_box_whole_only`` they do not
+    confirm a fragment, so it never reaches the map; without, they do (the narrow galley's counter, 2026-12-07).
+    An object seen whole before is still confirmed by them (``test_a_box_as_wide_as_the_image_makes_no_object_but_sees_one``)."""
+    counter = Box(3.0, 0.0, 0.35, 1.2, 0, 0, 1.8)
+    poses = [Pose2(1.95, 0.0, yaw) for yaw in [-0.9, -0.75] + list(np.linspace(-0.15, 0.0, 8))]
+    cols = [detection("shelf", [counter], T, CAM, 0.9) for T in poses]
+    assert all(b is not None and b.x1 <= 0.0 for b in cols)  # every box cut by the left border
+    assert all((b.x2 - b.x1) < 0.85 * CAM.info.width for b in cols[:2])
+    assert all((b.x2 - b.x1) >= 0.85 * CAM.info.width for b in cols[2:])
+    c = make(wide_box_whole_only=whole_only)
+    run(c, [counter], [("shelf", counter)], poses)
+    assert len(found(c, "shelf")) == (0 if whole_only else 1)

@@ -568,6 +568,13 @@ class ConsciousnessConfig:
         "filling the view (a wall, a shelf's side; 1: off)",
         live=True,
     )
+    wide_box_whole_only: bool = param(
+        True,
+        help="improved: a box at least wide_box_fraction of the image wide confirms only an object seen whole before "
+        "(through a box not cut by the image border); a fragment, seen only through cut boxes, it neither makes nor "
+        "confirms (a counter glimpsed at the image's edge, then filling the view, is no bookcase)",
+        live=True,
+    )
     central_support: bool = param(
         True,
         help="improved: one leg-sized island on the centre line of a box much wider than it is, for a class that may "

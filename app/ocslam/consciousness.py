@@ -376,9 +376,13 @@ class Consciousness:
             if cand is None or cand.status == "collision":
                 continue
             t = associate(cand, self._tracks, self._stamp, cfg, self._known_free)
-            if t is None and wide_box(cand.box_cols, float(cam.info.width), float(cfg.wide_box_fraction)):
-                rep.reject("wide_box_new")  # confirms an object seen before, makes none
-                continue
+            if wide_box(cand.box_cols, float(cam.info.width), float(cfg.wide_box_fraction)):
+                if t is None:
+                    rep.reject("wide_box_new")  # confirms an object seen before, makes none
+                    continue
+                if cfg.wide_box_whole_only and t.partial_only:
+                    rep.reject("wide_box_fragment")  # a fragment's evidence is its cut boxes: a view filled says no more
+                    continue
             if t is None:
                 t = create_track(self._next_id, cand, stamp, kf, cfg, self._known_free)
                 self._next_id += 1

@@ -558,7 +558,8 @@ class ConsciousnessConfig:
         True,
         help="improved, association and merges: two point sets joined across a gap (pieces of one object glimpsed "
         "through border-cut boxes) are one object only if the map has not seen free floor between them over more "
-        "than the class's leg span (an armchair and a sofa face 1.8 m apart are two chairs, not one sofa)",
+        "than one instance leaves free inside itself (a legged class's leg span, an open frame's width; an armchair "
+        "and a sofa face 1.8 m apart are two chairs, not one sofa)",
         live=True,
     )
     wide_box_fraction: float = param(

@@ -7,8 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from app.ocslam.classes import prior
 from app.ocslam.collisions import shared_fractions
 from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.messages import OccupancyGrid
+from app.ocslam.se2 import Pose2
+from app.ocslam.tracks import GridSpace, gap_seen_free
 
 
 def test_shared_fractions_equal_the_kd_trees_on_the_gap_too() -> None:
@@ -221,11 +225,8 @@ def test_a_pedestal_keeps_its_support_from_a_track_that_took_it_with_a_stool():
     assert np.min(np.hypot(bp[:, 0] - 3.4, bp[:, 1] - 0.9)) > 0.1 and len(bp) == len(stools)
 
 
-def _floor(free: bool) -> GridSpace:  # noqa: F821
+def _floor(free: bool) -> GridSpace:
     """A 6 m × 6 m map from (-1, -1): every cell seen free (``free``) or never seen."""
-    from app.ocslam.messages import OccupancyGrid
-    from app.ocslam.se2 import Pose2
-    from app.ocslam.tracks import GridSpace
 
     return GridSpace(OccupancyGrid(0.05, Pose2(-1.0, -1.0, 0.0), np.full((120, 120), 0 if free else -1, dtype=np.int8)))
 
@@ -234,9 +235,6 @@ def test_gap_seen_free_known_answers():
     """Free floor between two point sets over more than the class's free span (+ 0.15 m) parts them: a chair's legs
     span 0.6 m, a table's 2.3 m, a gnome is solid, a bookcase's open frame 1.5 m; unknown cells (under a solid
     body) or no grid part nothing."""
-    from app.ocslam.classes import prior
-    from app.ocslam.tracks import gap_seen_free
-
     a = np.stack([np.linspace(0.0, 0.6, 13), np.zeros(13)], axis=1)
     for gap, label, want in ((1.8, "chair", True), (0.9, "chair", False), (1.8, "table", False), (2.9, "table", True),
                              (0.5, "gnome", True), (0.3, "gnome", False), (1.6, "shelf", False), (1.9, "shelf", True)):

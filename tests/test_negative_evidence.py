@@ -24,11 +24,11 @@ from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint import Footprint
 from app.ocslam.footprint_estimate import estimate_footprint
-from app.ocslam.messages import CLASS_INDEX, Detection, Detections
+from app.ocslam.messages import CLASS_INDEX, Detection, Detections, OccupancyGrid
 from app.ocslam.outside import lidar_sees, seen_outside
 from app.ocslam.projection import bounding_areas
 from app.ocslam.se2 import Pose2
-from app.ocslam.tracks import create_track
+from app.ocslam.tracks import GridSpace, create_track
 
 CAM = default_camera()
 
@@ -213,9 +213,6 @@ def test_a_partial_view_does_not_continue_an_object_across_floor_seen_free():
     """The same armchair and desk chair, the desk chair's box cut by the border on the far side (no closed edge on
     the armchair's side): one sofa-sized chair could hold both, and nothing else tells them apart, until the map has
     seen the floor between them free — 1.35 m of it, more than a chair's legs span (``gap_seen_free``)."""
-    from app.ocslam.messages import OccupancyGrid
-    from app.ocslam.tracks import GridSpace
-
     cfg = ConsciousnessConfig()
     arm = np.array([[x, y] for x in np.linspace(2.1, 3.1, 11) for y in (1.7, 1.9)])
     desk = np.array([[2.4, 0.0], [2.8, 0.0], [2.4, 0.35], [2.8, 0.35]])

@@ -212,3 +212,34 @@ def test_a_duck_that_looks_small_is_not_a_clear_miss():
             c.update(detections([], cam), raycast([duck, wall], T, cam), T, stamp=1.2 + 0.2 * i)
         counts[min_px] = t.misses
     assert counts[20.0] == 0 and counts[0.0] == 5
+
+
+@pytest.mark.parametrize("own_points", [True, False])
+def test_flowers_against_the_far_side_of_a_partition_are_not_missed_through_it(own_points):
+    """Flowers stand against a thin partition, boxed from their open side; their footprint, completed to the class's
+    shape away from the robot, reaches into the partition. Seen from the partition's other side, the partition's face
+    returns a few centimetres in front of that footprint but well in front of every point the LIDAR ever saw of the
+    flowers: hidden, not a clear miss (``clear_view_own_points``); measured from the footprint alone, every frame
+    there is a miss."""
+    from synthetic_scene import Box, Cylinder, detection, detections, raycast
+
+    from app.ocslam.config import ConsciousnessConfig
+    from app.ocslam.consciousness import Consciousness
+
+    cam = default_camera()
+    partition = Box(2.045, 0.0, 0.03, 3.0, 0.0, 0.0, 2.0)  # its faces at x = 2.03 and 2.06
+    flowers = Cylinder(2.18, 0.0, 0.12, 0.0, 0.6)
+    cfg = ConsciousnessConfig()
+    cfg.clear_view_own_points = own_points
+    c = Consciousness(cfg, cam)
+    for i in range(6):  # boxed from its open side, 1.3–1.1 m away
+        T = Pose2(3.5 - 0.04 * i, 0.02 * i, math.pi)
+        c.update(detections([detection("flowers", flowers, T, cam, 0.9)], cam), raycast([partition, flowers], T, cam), T,
+                 stamp=0.2 * i)
+    (t,) = c._tracks
+    fp = t.footprint
+    assert fp is not None and fp.center[0] - 0.5 * fp.size_x < 2.03 + 0.1  # within the occlusion margin of its face
+    for i in range(5):  # from the partition's other side, no box (the camera sees the partition)
+        T = Pose2(0.9 + 0.04 * i, 0.0, 0.0)
+        c.update(detections([], cam), raycast([partition, flowers], T, cam), T, stamp=2.0 + 0.2 * i)
+    assert (t.misses == 0) if own_points else (t.misses == 5)

@@ -385,6 +385,13 @@ class ConsciousnessConfig:
         "counting as hidden what may continue behind a nearer return at its edge (0: only the central-half occlusion test)",
         live=True,
     )
+    clear_view_own_points: bool = param(
+        True,
+        help="improved: a frame without a box counts as a miss only when the LIDAR reaches the object's own points: "
+        "a return more than occlusion_margin_m in front of them hides it, even where its completed footprint reaches "
+        "nearer (an object against the far side of a partition, seen through its face)",
+        live=True,
+    )
     presence_evidence: bool = param(
         True,
         help="improved: the published presence is at most P(object there | frames that boxed it, frames in clear view "

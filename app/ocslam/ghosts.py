@@ -36,6 +36,17 @@ FloatArray = NDArray[np.float64]
 DETECTOR_INPUT_WIDTH_PX = 320.0
 
 
+def own_near_range(t: Track, T_map_scan: Pose2) -> float | None:
+    """The nearest of ``t``'s own LIDAR points from the scan's origin (m), or None without points. A return in
+    front of them by more than the occlusion margin is another surface's, even where the footprint (completed
+    to the class's shape) reaches nearer: an object seen from one side of a partition and completed into it is
+    hidden from the other side by the partition's face, which lies on no point of the object."""
+    if not t.evidence.has_points:
+        return None
+    d = t.evidence.points - np.array([T_map_scan.x, T_map_scan.y])
+    return float(np.sqrt(np.min(np.einsum("ij,ij->i", d, d))))
+
+
 def hidden_behind(
     corners: FloatArray, heights_m: FloatArray, areas: Sequence[BoundingArea], T_base_map: Pose2, cam: CameraModel, margin_m: float
 ) -> NDArray[np.bool_]:
@@ -134,8 +145,9 @@ def decay_tracks(
             continue
         fp = t.footprint
         assert fp is not None
-        if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, margin) or (
-            share > 0.0 and visible_share(fp, T_map_scan, beam_b_scan, beam_r_scan, margin, t.prior.length[1]) < share
+        near = own_near_range(t, T_map_scan) if cfg.clear_view_own_points else None
+        if occluded_by_scan(fp, T_map_scan, beam_b_scan, beam_r_scan, margin, near) or (
+            share > 0.0 and visible_share(fp, T_map_scan, beam_b_scan, beam_r_scan, margin, t.prior.length[1], near) < share
         ):
             keep.append(t)
             continue

@@ -162,12 +162,17 @@ def occluded_by_scan(
     beam_bearings: FloatArray,
     beam_ranges: FloatArray,
     margin_m: float,
+    near_m: float | None = None,
 ) -> bool:
     """True if the LIDAR sees something at least ``margin_m`` in front of the object over most of it.
 
     ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return).
+    ``near_m``: where the object may begin, if farther than its footprint's nearest point (its own LIDAR points'
+    nearest range): "in front" is measured from the farther of the two.
     """
     mid, half_span, r_obj = angular_span(footprint, T_frame_scan)
+    if near_m is not None and r_obj > 0.0:
+        r_obj = max(r_obj, float(near_m))
     # shrink to the central half so the object's own outline does not count
     half = 0.5 * half_span
     off = (beam_bearings - mid + np.pi) % (2 * np.pi) - np.pi
@@ -191,6 +196,7 @@ def visible_share(
     beam_ranges: FloatArray,
     margin_m: float,
     extent_m: float,
+    near_m: float | None = None,
 ) -> float:
     """Share of the object the LIDAR sees, counting what may continue behind a nearer return at its edge.
 
@@ -200,6 +206,8 @@ def visible_share(
     ``seen / (span + hidden run)``: the beams inside the span that reach the object, over the beams of the
     span plus the run of blocked beams adjoining it on either side (within ``extent_m`` at the object's
     range). 1.0 when no beam falls near the object; 0.0 when it is behind the scan's origin.
+    ``near_m``: where the object may begin, if farther than its footprint's nearest point (its own LIDAR points'
+    nearest range): "in front" is measured from the farther of the two.
 
     ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return)."""
     b_all = np.asarray(beam_bearings, dtype=np.float64)
@@ -207,6 +215,8 @@ def visible_share(
     if len(b_all) == 0:
         return 1.0
     mid, half, r_obj = angular_span(footprint, T_frame_scan)
+    if near_m is not None and r_obj > 0.0:
+        r_obj = max(r_obj, float(near_m))
     if r_obj <= 0.0:
         return 0.0
     off = (b_all - mid + np.pi) % (2 * np.pi) - np.pi

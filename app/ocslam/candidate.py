@@ -45,6 +45,8 @@ class Candidate:
     closed_edge: FloatArray | None = None
     #: the box's image columns ``(x1, x2)`` (camera pixels): two boxes side by side in one frame saw two things
     box_cols: tuple[float, float] | None = None
+    #: the whole scan's clusters (``cluster_extents`` labels) its chosen islands belong to; None: not known
+    clusters: frozenset[int] | None = None
     track_id: int | None = None
     status: str = "new"  # new | created | updated | collision
 

@@ -194,6 +194,34 @@ def shares_evidence(a: FloatArray, b: FloatArray, cfg: ConsciousnessConfig) -> b
     return float(np.mean(d <= gap)) >= float(cfg.shared_evidence_fraction)
 
 
+def one_island_class(label: str) -> bool:
+    """True if an object of the class stands on one island of the LIDAR plane: not on legs (a chair's, a
+    person's) and not an open frame whose sides are apart (a bookcase's panels, a door's jambs)."""
+    pc = prior(label)
+    return not pc.legged and not pc.open_span
+
+
+def side_by_side(a: tuple[float, float], b: tuple[float, float], share: float = 0.25) -> bool:
+    """True if two boxes' image columns ``(x1, x2)`` each reach beyond the other on their own side by at least
+    ``share`` of the narrower box's width: two things side by side, however much they overlap. A box nested in
+    another (the detector's part and whole of one object) is not."""
+    (x1, x2), (y1, y2) = (a, b) if a[0] <= b[0] else (b, a)  # x: the box that starts further left
+    gap = share * min(x2 - x1, y2 - y1)
+    return y1 - x1 >= gap and y2 - x2 >= gap
+
+
+def islands_apart(a: Candidate, b: Candidate) -> bool:
+    """True if two candidates of one frame, of one class that stands on one island, chose islands of different
+    clusters of the whole scan (a gap of at least the island threshold parts them along the scan) through boxes
+    side by side (:func:`side_by_side`): two objects (two pots of flowers end to end), however near their
+    centres and completed shapes."""
+    if a.label != b.label or not one_island_class(a.label) or not a.clusters or not b.clusters:
+        return False
+    if a.box_cols is None or b.box_cols is None or not side_by_side(a.box_cols, b.box_cols):
+        return False
+    return a.clusters.isdisjoint(b.clusters)
+
+
 def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessConfig, rep: FrameReport) -> None:
     """Same-frame collisions (Algorithm 1 lines 7-25 on this frame's candidates): same class and
     overlapping → one object seen through two boxes (merged); different classes overlapping → the one
@@ -212,7 +240,7 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
             d = float(np.linalg.norm(a.center - b.center))
             frac = overlap_fraction(fa, fb)
             if a.label == b.label:
-                if d < thr or frac >= ov:
+                if (d < thr or frac >= ov) and not (cfg.islands_apart and islands_apart(a, b)):
                     # one object seen through two boxes: a absorbs b; a box that saw one small island on its
                     # centre line (a pedestal) saw all of the object the LIDAR can: the other box's island is
                     # something beside it (a stool)
@@ -356,7 +384,8 @@ def resolve_track_collisions(
                         if a in lost:
                             break
                         continue
-                    if not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check):
+                    apart = cfg.islands_apart and (b.id in a.apart or a.id in b.apart)
+                    if apart or not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own; a pedestal's support
                         # is its own whatever its footprint (principle 16: its cross-section is that support)

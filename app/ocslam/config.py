@@ -540,6 +540,13 @@ class ConsciousnessConfig:
         "beside a chair that the class's sofa-sized shapes would otherwise take in (0: off, the class's largest size)",
         live=True,
     )
+    islands_apart: bool = param(
+        True,
+        help="improved: two boxes of one frame and of a class that stands on one island (not legged, not an open "
+        "frame), whose islands are different clusters of the scan, saw two objects: not merged in the frame, and "
+        "their objects stay two however their points mix later (two pots of flowers end to end)",
+        live=True,
+    )
     union_width_check: bool = param(
         True,
         help="improved: two objects of one class seen side by side through two boxes of one frame, whose LIDAR points "

@@ -52,7 +52,12 @@ from app.ocslam.association import associate, bearing_match, sighting, wide_box
 from app.ocslam.calibration import ScoreCalibration
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
-from app.ocslam.collisions import ownership_order, resolve_frame_collisions, resolve_track_collisions
+from app.ocslam.collisions import (
+    islands_apart,
+    ownership_order,
+    resolve_frame_collisions,
+    resolve_track_collisions,
+)
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import close_pairs, cluster_extents
@@ -363,6 +368,8 @@ class Consciousness:
             )
             rep.islands[k] = isl
             candidates[k] = cand
+            if cand is not None and labels is not None and cand.islands:
+                cand.clusters = frozenset(int(v) for g in cand.islands for v in np.unique(labels[isl[g].indices]).tolist())
             if ownership and cand is not None:
                 for g in cand.islands:
                     owned[isl[g].indices] = True
@@ -399,6 +406,12 @@ class Consciousness:
             seen_through.append((cand, t))
             if t not in touched:
                 touched.append(t)
+        if cfg.islands_apart:
+            for i, (ca, ta) in enumerate(seen_through):
+                for cb, tb in seen_through[i + 1 :]:
+                    if ta is not tb and islands_apart(ca, cb):
+                        ta.apart.add(tb.id)
+                        tb.apart.add(ta.id)
         # negative evidence: points of each object seen now outside the box that saw it (a neighbour's)
         ratio, ray_sigma, width_cap = float(cfg.outside_ratio), float(cfg.ray_centre_sigma_m), float(cfg.box_width_cap)
         behind = bool(cfg.ray_centre_behind_surface)

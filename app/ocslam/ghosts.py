@@ -120,12 +120,18 @@ def decay_tracks(
             b, _r = cam.bearing_ranges_scan(T_scan_map.transform_points(centers[boxed]))
             held = np.zeros(len(b), dtype=bool)
             boxed_labels = np.array([cand[k].label for k in boxed], dtype=object)
-            # a box explains one object: one that gave an object of this frame explains no other
-            taken = {t.boxes[stamp] for t in tracks if t.touched_stamp == stamp and stamp in t.boxes} if cfg.box_explains_one else set()
+            # a box explains one object: one that gave an object of this frame explains no other, but for the
+            # objects seen apart from that one before (two boxes, two islands): the detector boxed the two as one
+            taken: dict[int, int] = {}
+            if cfg.box_explains_one:
+                for t in tracks:
+                    if t.touched_stamp == stamp and stamp in t.boxes:
+                        taken[t.boxes[stamp]] = t.id
             for j, a in enumerate(areas):
-                if j in taken:
-                    continue
                 rows = boxed_labels == a.label
+                if j in taken:
+                    owner = taken[j]
+                    rows &= np.array([owner in cand[k].apart for k in boxed], dtype=bool)
                 if rows.any():
                     held[rows] |= a.contains_bearing(b[rows], margin=0.05)
             explained = {boxed[r] for r in np.flatnonzero(held).tolist()}

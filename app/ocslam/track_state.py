@@ -40,6 +40,7 @@ def tracks_state(tracks: list[Track]) -> list[dict[str, Any]]:
             else [float(t.footprint.center[0]), float(t.footprint.center[1]), float(t.footprint.yaw),
                   float(t.footprint.size_x), float(t.footprint.size_y)],
             "evidence": t.evidence.state_dict(),
+            "apart": sorted(t.apart),
         }
         for t in tracks
     ]
@@ -67,6 +68,7 @@ def tracks_from_state(items: list[dict[str, Any]]) -> list[Track]:
             detections=int(td.get("detections", 1)),
             misses=int(td.get("misses", 0)),
             complete_views=int(td.get("complete_views", 0)),
+            apart={int(v) for v in td.get("apart", [])},
         )
         conf = td.get("conf")
         if conf is not None and len(conf) == 3 and all(math.isfinite(float(v)) for v in conf):

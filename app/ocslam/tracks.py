@@ -64,6 +64,9 @@ class Track:
     conf_sum: float = 0.0  # confidences of the frames that counted (presence_confidence = mean / best)
     conf_n: int = 0
     conf_best: float = 0.0
+    #: objects of its class seen in one frame with it through another box, on an island apart from its own
+    #: (:func:`~app.ocslam.collisions.islands_apart`): two instances, however their accumulated points mix
+    apart: set[int] = field(default_factory=set)
 
     def frame_confidence(self, c: float, cfg: ConsciousnessConfig) -> float:
         """``Y_c`` of the soft decision for a new frame with box confidence ``c``: the box's own
@@ -464,6 +467,7 @@ def merge_tracks(keep: Track, drop: Track, cfg: ConsciousnessConfig, known_free:
     keep.presence = max(keep.presence, drop.presence, min(conf, 1.0) * frames / F)
     keep.frames = frames
     keep.detections += drop.detections
+    keep.apart |= drop.apart - {keep.id}
     keep.complete_views += drop.complete_views
     # a frame in which one of the two was boxed is no miss of the object they both were
     seen_k = {m for m in keep.miss_stamps if m in drop.boxes}

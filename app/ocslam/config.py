@@ -540,6 +540,12 @@ class ConsciousnessConfig:
         "beside a chair that the class's sofa-sized shapes would otherwise take in (0: off, the class's largest size)",
         live=True,
     )
+    base_hidden_makes_none: bool = param(
+        True,
+        help="improved: a box whose bottom edge is at or above the horizon (its object's base hidden by something "
+        "nearer, or the box wrong) makes no object; it may still confirm one",
+        live=True,
+    )
     islands_apart: bool = param(
         True,
         help="improved: two boxes of one frame and of a class that stands on one island (not legged, not an open "

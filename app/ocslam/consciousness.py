@@ -390,6 +390,9 @@ class Consciousness:
                 if cfg.wide_box_whole_only and t.partial_only:
                     rep.reject("wide_box_fragment")  # a fragment's evidence is its cut boxes: a view filled says no more
                     continue
+            if t is None and cfg.base_hidden_makes_none and not math.isfinite(areas[cand.area_index].near_range_m):
+                rep.reject("base_hidden")  # its base hidden: the island in its wedge may be what hides it
+                continue
             if t is None:
                 t = create_track(self._next_id, cand, stamp, kf, cfg, self._known_free)
                 self._next_id += 1

@@ -314,3 +314,8 @@ def test_two_pots_side_by_side_through_two_boxes_stay_two(apart: bool):
         assert all(t.misses == 0 for t in flowers)
         centres = sorted(float(t.footprint.center[0]) for t in flowers)
         assert abs(centres[0] - 3.0) < 0.1 and abs(centres[1] - 3.28) < 0.1
+        a, b = flowers
+        assert a.apart == {b.id} and b.apart == {a.id}
+        from app.ocslam.track_state import tracks_from_state, tracks_state
+
+        assert [t.apart for t in tracks_from_state(tracks_state(flowers))] == [{b.id}, {a.id}]  # saved with the session

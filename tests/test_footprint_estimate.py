@@ -179,3 +179,29 @@ def test_legs_in_unknown_space_leave_the_completion_alone():
     unknown = estimate_footprint(ev, table, known_free=GridSpace(_floor_grid(free_to_x=3.9), legs_free=True))
     assert float(np.hypot(*(blind.center - np.array([4.07, 0.30])))) > 0.4  # completed: the rule had a case to change
     assert np.allclose(unknown.center, blind.center) and unknown.size_x == blind.size_x and unknown.size_y == blind.size_y
+
+
+def _leg(x: float, y: float) -> np.ndarray:
+    return np.array([[x + dx, y + dy] for dx in (-0.03, 0.03) for dy in (-0.03, 0.03)])
+
+
+@pytest.mark.parametrize("far_views", [3, 2])
+def test_a_leg_seen_in_three_frames_is_no_stray(far_views: int):
+    """A 1.8 × 1.0 m table whose near leg was seen in 40 frames (from views that showed it alone) and its other three
+    legs in ``far_views`` frames each. Voxels seen in under a tenth of the best voxel's frames, away from it, are
+    strays (a background point between a pedestal's legs) — but not a leg seen in three frames: the footprint spans
+    the four legs. Seen twice only, the far legs are still strays, and the footprint stays at the near leg."""
+    legs = [_leg(0.0, 0.0), _leg(1.7, 0.0), _leg(0.0, 0.9), _leg(1.7, 0.9)]
+    ev = ObjectEvidence()
+    for _ in range(40):
+        ev.add_points(legs[0])
+    for _ in range(far_views):
+        ev.add_points(np.vstack(legs[1:]))
+    fp = estimate_footprint(ev, CLASS_PRIORS["table"])
+    assert fp is not None
+    big, small = max(fp.size_x, fp.size_y), min(fp.size_x, fp.size_y)
+    if far_views >= 3:
+        assert big > 1.6 and small > 0.8
+        np.testing.assert_allclose(fp.center, [0.85, 0.45], atol=0.1)
+    else:
+        assert np.hypot(*(fp.center - np.array([0.85, 0.45]))) > 0.3

@@ -23,6 +23,8 @@ from app.ocslam.unseen_part import unseen_part_conflict
 
 FloatArray = NDArray[np.float64]
 #: A voxel seen rarely and farther than this from every well-seen voxel is a stray (m).
+#: a voxel seen in this many frames is the object's, however often its best voxel was seen (principle 39)
+_STRAY_MIN_HITS = 3
 _STRAY_M = 0.3
 
 
@@ -133,8 +135,9 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
         points, all_hits = points[trusted], all_hits[trusted]
     # stray points that once joined the object (a background point between a pedestal table's legs) do
     # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
-    # well-seen voxel are ignored
-    strong = all_hits >= max(1.0, 0.1 * float(all_hits.max()))
+    # well-seen voxel are ignored — but a voxel seen in _STRAY_MIN_HITS frames is never a stray (principle 39:
+    # a four-legged table's far legs, seen in a few frames while views of its near leg alone piled up)
+    strong = all_hits >= min(max(1.0, 0.1 * float(all_hits.max())), float(_STRAY_MIN_HITS))
     n_strong = int(np.count_nonzero(strong))
     if n_strong == len(strong) or n_strong == 0:
         pts, hits = points, all_hits

@@ -23,9 +23,9 @@ from app.ocslam.unseen_part import unseen_part_conflict
 
 FloatArray = NDArray[np.float64]
 #: A voxel seen rarely and farther than this from every well-seen voxel is a stray (m).
-#: a voxel seen in this many frames is the object's, however often its best voxel was seen (principle 39)
-_STRAY_MIN_HITS = 3
 _STRAY_M = 0.3
+#: A voxel seen in this many frames is the object's, however often its best voxel was seen (principle 39).
+_STRAY_MIN_HITS = 3
 
 
 def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:

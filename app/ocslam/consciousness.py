@@ -54,6 +54,7 @@ from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import (
     islands_apart,
+    one_island_class,
     ownership_order,
     resolve_frame_collisions,
     resolve_track_collisions,
@@ -368,8 +369,9 @@ class Consciousness:
             )
             rep.islands[k] = isl
             candidates[k] = cand
-            if cand is not None and labels is not None and cand.islands:
-                cand.clusters = frozenset(int(v) for g in cand.islands for v in np.unique(labels[isl[g].indices]).tolist())
+            if cfg.islands_apart and cand is not None and labels is not None and cand.islands and one_island_class(cand.label):
+                # the scan clusters of its islands, for principle 37 (islands_apart reads them for these classes only)
+                cand.clusters = frozenset(np.unique(labels[np.concatenate([isl[g].indices for g in cand.islands])]).tolist())
             if ownership and cand is not None:
                 for g in cand.islands:
                     owned[isl[g].indices] = True

@@ -143,17 +143,20 @@ def in_frame_boxes(
     return frac, side
 
 
-def angular_span(footprint: Footprint, T_frame_scan: Pose2) -> tuple[float, float, float]:
+def angular_span(footprint: Footprint, T_frame_scan: Pose2, near_m: float | None = None) -> tuple[float, float, float]:
     """The object as the scan's origin sees it: ``(mid, half, r)``, the bearing of the middle of its
     footprint's angular span, half that span (rad, about the scan origin) and its nearest distance (m;
-    0 when the origin is inside it)."""
+    0 when the origin is inside it). ``near_m``: where the object may begin, if farther than its footprint's
+    nearest point (its own LIDAR points' nearest range): ``r`` is the farther of the two (unless 0)."""
     T_scan_frame = T_frame_scan.inverse()
     corners = T_scan_frame.transform_points(np.vstack([footprint.corners, footprint.center[None, :]]))
     b = np.arctan2(corners[:, 1], corners[:, 0])
     rel = (b - b[-1] + np.pi) % (2 * np.pi) - np.pi
     lo, hi = b[-1] + rel.min(), b[-1] + rel.max()
-    r_obj = footprint.transformed(T_scan_frame).nearest_distance(np.zeros(2))
-    return float(0.5 * (lo + hi)), float(0.5 * (hi - lo)), float(r_obj)
+    r_obj = float(footprint.transformed(T_scan_frame).nearest_distance(np.zeros(2)))
+    if near_m is not None and r_obj > 0.0:
+        r_obj = max(r_obj, float(near_m))
+    return float(0.5 * (lo + hi)), float(0.5 * (hi - lo)), r_obj
 
 
 def occluded_by_scan(
@@ -167,12 +170,9 @@ def occluded_by_scan(
     """True if the LIDAR sees something at least ``margin_m`` in front of the object over most of it.
 
     ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return).
-    ``near_m``: where the object may begin, if farther than its footprint's nearest point (its own LIDAR points'
-    nearest range): "in front" is measured from the farther of the two.
+    ``near_m``: where the object may begin, if farther than its footprint's nearest point (:func:`angular_span`).
     """
-    mid, half_span, r_obj = angular_span(footprint, T_frame_scan)
-    if near_m is not None and r_obj > 0.0:
-        r_obj = max(r_obj, float(near_m))
+    mid, half_span, r_obj = angular_span(footprint, T_frame_scan, near_m)
     # shrink to the central half so the object's own outline does not count
     half = 0.5 * half_span
     off = (beam_bearings - mid + np.pi) % (2 * np.pi) - np.pi
@@ -206,17 +206,14 @@ def visible_share(
     ``seen / (span + hidden run)``: the beams inside the span that reach the object, over the beams of the
     span plus the run of blocked beams adjoining it on either side (within ``extent_m`` at the object's
     range). 1.0 when no beam falls near the object; 0.0 when it is behind the scan's origin.
-    ``near_m``: where the object may begin, if farther than its footprint's nearest point (its own LIDAR points'
-    nearest range): "in front" is measured from the farther of the two.
+    ``near_m``: where the object may begin, if farther than its footprint's nearest point (:func:`angular_span`).
 
     ``beam_bearings``/``beam_ranges``: ``(N,)`` beams about the scan origin (``inf``: no return)."""
     b_all = np.asarray(beam_bearings, dtype=np.float64)
     r_all = np.asarray(beam_ranges, dtype=np.float64)
     if len(b_all) == 0:
         return 1.0
-    mid, half, r_obj = angular_span(footprint, T_frame_scan)
-    if near_m is not None and r_obj > 0.0:
-        r_obj = max(r_obj, float(near_m))
+    mid, half, r_obj = angular_span(footprint, T_frame_scan, near_m)
     if r_obj <= 0.0:
         return 0.0
     off = (b_all - mid + np.pi) % (2 * np.pi) - np.pi

@@ -48,7 +48,7 @@ def clear_view_frames(trace_path: Path, max_range_m: float) -> list[dict]:
     import app.ocslam.consciousness as consciousness_module
     import app.ocslam.ghosts as ghosts
     from app.ocslam.evaluation import evaluate_objects
-    from app.ocslam.presence import centers_in_camera_view, in_frame_boxes, occluded_by_scan, visible_share
+    from app.ocslam.presence import occluded_by_scan, visible_share
     from app.sweep.trace import replay_trace
 
     with open(trace_path, "rb") as fh:
@@ -63,13 +63,12 @@ def clear_view_frames(trace_path: Path, max_range_m: float) -> list[dict]:
             T_base_map, T_scan_map = T_map_base.inverse(), T_map_scan.inverse()
             centers = np.array([t.footprint.center for t in live])
             heights = np.array([t.prior.height[1] for t in live])
-            idx = np.flatnonzero(centers_in_camera_view(centers, heights, T_base_map, cam, max_range_m))
-            if len(idx):
-                corners = np.stack([live[k].footprint.corners for k in idx])
-                frac, side = in_frame_boxes(corners, heights[idx], T_base_map, cam)
-                side = side * ghosts.DETECTOR_INPUT_WIDTH_PX / float(cam.info.width)
-                ok = frac >= c.clear_view_in_frame  # the size test is what the size table measures
-                idx, side = idx[ok], side[ok]
+            # the ghost decay's own view test, at this range cap and with no size test (the size table measures it)
+            in_view, side_px = ghosts.in_clear_view(
+                live, centers, heights, T_base_map, cam, max_range_m, float(c.clear_view_in_frame), 0.0
+            )
+            idx = np.flatnonzero(in_view)
+            side = side_px[idx]
             if len(idx):
                 bearing, rng = cam.bearing_ranges_scan(T_scan_map.transform_points(centers[idx]))
                 hidden = ghosts.hidden_behind(
@@ -81,6 +80,7 @@ def clear_view_frames(trace_path: Path, max_range_m: float) -> list[dict]:
                     t = live[k]
                     if hidden[j]:
                         continue
+                    # any box of its class over its bearing (the decay also lets a box explain one object only)
                     boxed = any(a.label == t.label and bool(a.contains_bearing(bearing[j : j + 1], margin=0.05)[0]) for a in areas)
                     if not boxed:  # the scan's tests: a miss only where the LIDAR sees the object
                         near = ghosts.own_near_range(t, T_map_scan) if c.clear_view_own_points else None

@@ -47,6 +47,34 @@ def own_near_range(t: Track, T_map_scan: Pose2) -> float | None:
     return float(np.sqrt(np.min(np.einsum("ij,ij->i", d, d))))
 
 
+def in_clear_view(
+    tracks: Sequence[Track],
+    centers: FloatArray,
+    heights_m: FloatArray,
+    T_base_map: Pose2,
+    cam: CameraModel,
+    max_range_m: float,
+    frame_share: float,
+    min_side_px: float,
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Which of ``tracks`` (with footprints; their ``(N, 2)`` map ``centers`` and ``(N,)`` heights) the detector
+    would be asked to box from ``T_base_map``'s inverse pose: ``(in_view (N,), side_px (N,))``. In view: the centre
+    projects inside the image within ``max_range_m``, at least ``frame_share`` of the outline's image box is inside
+    the image (the detector's labels leave out objects less than half in the frame) and that part's smaller side,
+    ``side_px`` in the detector's input, is at least ``min_side_px`` (it rarely boxes an object that looks smaller);
+    ``side_px`` is 0 where the centre is not in view or neither of the last two tests is asked for."""
+    in_view = centers_in_camera_view(centers, heights_m, T_base_map, cam, max_range_m)
+    side_px = np.zeros(len(in_view))
+    if (frame_share > 0.0 or min_side_px > 0.0) and in_view.any():
+        idx = np.flatnonzero(in_view)
+        corners = np.stack([tracks[k].footprint.corners for k in idx.tolist()])
+        frac, side = in_frame_boxes(corners, heights_m[idx], T_base_map, cam)
+        side *= DETECTOR_INPUT_WIDTH_PX / float(cam.info.width)  # as the detector's input sees it
+        side_px[idx] = side
+        in_view[idx] = (frac >= frame_share) & (side >= min_side_px)
+    return in_view, side_px
+
+
 def hidden_behind(
     corners: FloatArray, heights_m: FloatArray, areas: Sequence[BoundingArea], T_base_map: Pose2, cam: CameraModel, margin_m: float
 ) -> NDArray[np.bool_]:
@@ -102,16 +130,10 @@ def decay_tracks(
     if cand:
         centers = np.array([t.footprint.center for t in cand if t.footprint is not None], dtype=np.float64).reshape(-1, 2)
         heights = np.array([t.prior.height[1] for t in cand], dtype=np.float64)
-        in_view = centers_in_camera_view(centers, heights, T_base_map, cam, float(cfg.decay_max_range_m))
-        frame_share, min_side = float(cfg.clear_view_in_frame), float(cfg.clear_view_min_px)
-        if (frame_share > 0.0 or min_side > 0.0) and in_view.any():
-            # the detector's labels leave out objects less than half in the frame, and it rarely boxes one
-            # that looks small: a box is not expected
-            idx = np.flatnonzero(in_view)
-            corners = np.stack([cand[k].footprint.corners for k in idx.tolist()])
-            frac, side = in_frame_boxes(corners, heights[idx], T_base_map, cam)
-            side *= DETECTOR_INPUT_WIDTH_PX / float(cam.info.width)  # as the detector's input sees it
-            in_view[idx] = (frac >= frame_share) & (side >= min_side)
+        in_view, _side = in_clear_view(
+            cand, centers, heights, T_base_map, cam, float(cfg.decay_max_range_m), float(cfg.clear_view_in_frame),
+            float(cfg.clear_view_min_px),
+        )
         view = np.flatnonzero(in_view).tolist()
         # of those, the ones explained by a box of their class whose wedge holds them
         boxed = [k for k in view if cand[k].label in labels]

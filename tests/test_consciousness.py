@@ -656,6 +656,22 @@ def test_objects_move_with_a_loop_closure_correction():
     assert c.apply_correction(lambda k: (_ for _ in ()).throw(KeyError(k))) == 0
 
 
+def test_a_correction_reaches_the_saved_state_before_the_next_frame():
+    """The moved objects are re-estimated when first read (objects, state_dict), not at the correction: a
+    session saved between a correction and the next frame holds the moved footprints."""
+    ball = Cylinder(2.0, 0.0, 0.11, 0.0, 0.22)
+    c = make()
+    for i, T in enumerate(line(6)):
+        scan = raycast([ball], T, CAM)
+        c.update(detections([detection("ball", ball, T, CAM, 0.9)], CAM), scan, T, stamp=0.2 * i, keyframe=(7, Pose2()))
+    (before,) = c.objects
+    c.apply_correction(lambda k: {7: Pose2(0.5, 0.0, 0.0)}[k])
+    (td,) = c.state_dict()["tracks"]
+    assert td["footprint"][0] == pytest.approx(before.pose.x + 0.5, abs=1e-6)
+    (after,) = c.objects
+    assert after.pose.x == pytest.approx(td["footprint"][0], abs=1e-12)
+
+
 def test_objects_seen_from_two_keyframes_follow_each_part():
     ball = Cylinder(2.0, 0.0, 0.11, 0.0, 0.22)
     c = make()

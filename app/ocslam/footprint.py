@@ -111,11 +111,14 @@ def _hull_angles(p: FloatArray) -> FloatArray:
     hull = cv2.convexHull(p.astype(np.float32)).reshape(-1, 2).astype(np.float64)
     if len(hull) < 2:
         return np.array([0.0])
-    e = np.concatenate([hull[1:], hull[:1]]) - hull  # each edge (np.roll's result, without its overhead)
+    e = np.empty_like(hull)  # each edge (np.roll(hull, -1) − hull, without its overhead)
+    np.subtract(hull[1:], hull[:-1], out=e[:-1])
+    np.subtract(hull[0], hull[-1], out=e[-1])
     e = e[np.hypot(e[:, 0], e[:, 1]) > 1e-6]
     if len(e) == 0:
         return np.array([0.0])
-    a = np.sort(np.round(np.arctan2(e[:, 1], e[:, 0]) % (np.pi / 2), 9))
+    a = (np.arctan2(e[:, 1], e[:, 0]) % (np.pi / 2)).round(9)
+    a.sort()
     return a[np.concatenate(([True], a[1:] != a[:-1]))]  # np.unique's result, without its overhead
 
 
@@ -136,21 +139,21 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
     if n >= 3:
         q = p - p.sum(axis=0) / n  # p.mean(axis=0), without its overhead
         thetas = _hull_angles(q)
-        cs, sn = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
-        qx, qy = q[:, 0][None, :], q[:, 1][None, :]
-        a = qx * cs + qy * sn  # (K, N)
-        b = qy * cs - qx * sn
-        a_lo, a_hi = _MIN(a, axis=1, keepdims=True), _MAX(a, axis=1, keepdims=True)
-        b_lo, b_hi = _MIN(b, axis=1, keepdims=True), _MAX(b, axis=1, keepdims=True)
-        area = ((a_hi - a_lo) * (b_hi - b_lo))[:, 0]
-        q0, q1 = q[:, 0], q[:, 1]
-        if max(float(_MAX(q0) - _MIN(q0)), float(_MAX(q1) - _MIN(q1))) < 0.5:
+        k = len(thetas)
+        cs, sn = np.cos(thetas), np.sin(thetas)
+        # both coordinates along every candidate's axes at once: rows ``a = x·cos + y·sin`` (K), then
+        # ``b = x·(−sin) + y·cos`` (K; ``y·cos − x·sin`` in the same roundings)
+        ab = q[:, 0][None, :] * np.concatenate([cs, -sn])[:, None] + q[:, 1][None, :] * np.concatenate([sn, cs])[:, None]
+        ab_lo, ab_hi = _MIN(ab, axis=1, keepdims=True), _MAX(ab, axis=1, keepdims=True)
+        ext = ab_hi - ab_lo
+        area = (ext[:k] * ext[k:])[:, 0]
+        q_ext = _MAX(q, axis=0) - _MIN(q, axis=0)
+        if max(float(q_ext[0]), float(q_ext[1])) < 0.5:
             # a small cluster: the outline says little, the minimum-area rectangle follows its line
             th = float(thetas[int(np.argmin(area))])
         else:
-            da = np.minimum(a - a_lo, a_hi - a)
-            db = np.minimum(b - b_lo, b_hi - b)
-            score = np.add.reduce(1.0 / np.maximum(np.minimum(da, db), 0.01), axis=1)
+            d = np.minimum(ab - ab_lo, ab_hi - ab)  # each point's distance to the nearer side, per axis
+            score = np.add.reduce(1.0 / np.maximum(np.minimum(d[:k], d[k:]), 0.01), axis=1)
             best = np.flatnonzero(score >= score.max() * (1.0 - 1e-6))  # ties: the smaller area
             th = float(thetas[best[np.argmin(area[best])]])
     elif n == 2:
@@ -159,9 +162,9 @@ def min_area_rect(points: FloatArray) -> tuple[float, FloatArray, FloatArray]:
     else:
         th = 0.0
     c, s = np.cos(th), np.sin(th)
-    a1 = p[:, 0] * c + p[:, 1] * s
-    b1 = -p[:, 0] * s + p[:, 1] * c
-    return th, np.array([_MIN(a1), _MIN(b1)]), np.array([_MAX(a1), _MAX(b1)])
+    # (a, b) = (x·c + y·s, x·(−s) + y·c) per point (``−x·s + y·c`` in the same roundings)
+    ab1 = p[:, 0:1] * np.array([c, -s]) + p[:, 1:2] * np.array([s, c])
+    return th, _MIN(ab1, axis=0), _MAX(ab1, axis=0)
 
 
 def rect_corners_near(points: FloatArray, rect: tuple[float, FloatArray, FloatArray]) -> tuple[FloatArray, NDArray[np.int64]]:

@@ -231,7 +231,13 @@ class OccupancyGrid:
 
     def world_to_cell(self, points: NDArray[np.float64]) -> NDArray[np.int64]:
         """``(N, 2)`` points in ``frame_id`` → ``(N, 2)`` integer ``(row, col)`` (may be out of bounds)."""
-        local = self.origin.inverse().transform_points(points)
+        o = self.origin
+        if o.yaw == 0.0:
+            # an unrotated origin (SLAM's grids): the inverse transform is a shift (x·1 + y·(−0) − x₀ is x − x₀ in
+            # IEEE arithmetic: the same cells, without the transform's overhead)
+            local = np.asarray(points, dtype=np.float64).reshape(-1, 2) - np.array([o.x, o.y], dtype=np.float64)
+        else:
+            local = o.inverse().transform_points(points)
         out = np.empty((len(local), 2), dtype=np.int64)
         out[:, 0] = np.floor(local[:, 1] / self.resolution)
         out[:, 1] = np.floor(local[:, 0] / self.resolution)

@@ -42,16 +42,16 @@ def lidar_sees(
     full = abs(increment) * n >= 2.0 * np.pi - 1e-6
     k = np.rint(wrap_angle(b - angle_min) / increment if full else (b - angle_min) / increment).astype(np.int64)
     seen = np.zeros(len(p), dtype=bool)
-    for d in (-1, 0, 1):
-        j = k + d
-        if full:
-            j %= n
-            ok = np.ones(len(p), dtype=bool)
-        else:
-            ok = (j >= 0) & (j < n)
-            j = np.clip(j, 0, n - 1)
-        with np.errstate(invalid="ignore"):
-            seen |= ok & (np.abs(ranges[j] - r) <= tol_m)
+    with np.errstate(invalid="ignore"):
+        for d in (-1, 0, 1):
+            j = k + d
+            if full:
+                j %= n
+                seen |= np.abs(ranges[j] - r) <= tol_m
+            else:
+                ok = (j >= 0) & (j < n)
+                j = np.clip(j, 0, n - 1)
+                seen |= ok & (np.abs(ranges[j] - r) <= tol_m)
     return seen
 
 

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from app.ocslam.footprint import linspace, nearest_distances
 
-__all__ = ["unseen_part_conflict"]
+__all__ = ["unseen_part_conflict", "view_indices"]
 
 FloatArray = NDArray[np.float64]
 OccupiedFn = Callable[[FloatArray], NDArray[np.bool_]]
@@ -26,6 +26,12 @@ OccupiedFn = Callable[[FloatArray], NDArray[np.bool_]]
 _OWN_M = 0.1
 #: steps along a line of sight (m)
 _STEP_M = 0.05
+
+
+def view_indices(m: int) -> list[int]:
+    """Up to three of ``m`` viewpoints: the first, the middle one and the last (``np.linspace(0, m − 1, 3)``
+    rounded, without repeats)."""
+    return list(range(m)) if m <= 3 else [0, round((m - 1) / 2), m - 1]
 
 
 def unseen_part_conflict(
@@ -47,15 +53,16 @@ def unseen_part_conflict(
         return 0.0
     a = linspace(float(s_center[0] - size[0] / 2 + 0.05), float(s_center[0] + size[0] / 2 - 0.05), 5)
     b = linspace(float(s_center[1] - size[1] / 2 + 0.05), float(s_center[1] + size[1] / 2 - 0.05), 5)
-    S = np.empty((25, 2))
-    S[:, 0] = np.tile(a, 5)
-    S[:, 1] = np.repeat(b, 5)
+    grid = np.empty((5, 5, 2))  # the 5 × 5 samples, b-major (rows of ``a``)
+    grid[:, :, 0] = a[None, :]
+    grid[:, :, 1] = b[:, None]
+    S = grid.reshape(25, 2)
     out = ((S[:, 0] < lo[0] - _OWN_M) | (S[:, 0] > hi[0] + _OWN_M)
            | (S[:, 1] < lo[1] - _OWN_M) | (S[:, 1] > hi[1] + _OWN_M))
     if int(np.count_nonzero(out)) < 3:
         return 0.0
     P = S[out] @ axes  # rectangle coordinates → object frame
-    V = views[np.unique(np.linspace(0, len(views) - 1, min(3, len(views))).round().astype(np.int64))]
+    V = views[view_indices(len(views))]
     hidden = np.ones(len(P), dtype=bool)
     for v in V:
         d = P - v[None, :]
@@ -70,7 +77,9 @@ def unseen_part_conflict(
         # on the line of sight past the object's nearest point, short of the sample: what stands in front of
         # the object (hiding part of it) says nothing of its depth
         before = (t[None, :] > front) & (t[None, :] < (r[:, None] - _OWN_M))
-        occ = occupied(Q.reshape(-1, 2)).reshape(len(P), n) & before
+        occ = np.zeros((len(P), n), dtype=bool)
+        if before.any():
+            occ[before] = occupied(Q[before])  # only the samples that count are looked up
         if occ.any():
             hit = Q[occ]
             occ[occ] = nearest_distances(hit, pts) > _OWN_M  # an obstacle that is not the object itself

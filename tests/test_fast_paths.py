@@ -85,3 +85,30 @@ def test_grid_cells_of_an_unrotated_origin_equal_the_inverse_transforms(ox, oy, 
 def test_view_indices_are_the_rounded_linspace(m: int) -> None:
     expected = np.unique(np.linspace(0, m - 1, min(3, m)).round().astype(np.int64)).tolist()
     assert view_indices(m) == expected
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(-1e3, 1e3, allow_nan=False, width=64), min_size=2, max_size=2))
+def test_a_dot_products_root_is_numpys_norm(v) -> None:
+    """association / evidence: ``math.sqrt(d·d)`` for ``np.linalg.norm(d)`` of a 2-vector."""
+    import math
+
+    d = np.array(v, dtype=np.float64)
+    assert math.sqrt(float(d.dot(d))) == float(np.linalg.norm(d))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(2, 60), st.integers(0, 2**31 - 1))
+def test_pairwise_squared_distances_and_means_keep_numpys_values(n: int, seed: int) -> None:
+    """evidence.add_ray's ``dx² + dy²`` for ``np.sum(Δ ** 2, axis=-1)``; footprint_estimate's
+    ``add.reduce / n`` for ``mean(axis=0)``; a share above one half in integers for ``np.mean(mask) > 0.5``."""
+    rng = np.random.default_rng(seed)
+    o = rng.normal(0.0, 3.0, (n, 2))
+    dx = o[:, 0][:, None] - o[:, 0][None, :]
+    dy = o[:, 1][:, None] - o[:, 1][None, :]
+    assert np.array_equal(dx * dx + dy * dy, np.sum((o[:, None, :] - o[None, :, :]) ** 2, axis=-1))
+    u = np.abs(rng.normal(0.0, 1.0, (n, 2)))
+    assert np.array_equal(np.add.reduce(u, axis=0) / len(u), u.mean(axis=0))
+    mask = rng.random(n) < rng.random()
+    assert (2 * int(np.count_nonzero(mask)) > n) == bool(np.mean(mask) > 0.5)
+    assert (2 * int(np.count_nonzero(mask)) >= n) == bool(np.mean(mask) >= 0.5)

@@ -311,7 +311,7 @@ def _see_through(area: BoundingArea, pc: ClassPrior, r_front: float, beam_b: Flo
     if len(r) < 2:
         return False
     depth = (pc.width[2] + 0.1) if pc.on_wall else (pc.apparent_width_max + 0.1)
-    return bool(np.mean(r > r_front + depth) > 0.5)
+    return 2 * int(np.count_nonzero(r > r_front + depth)) > len(r)  # most of them (np.mean > 0.5, in integers)
 
 
 def _narrower_than_class(b: FloatArray, pc: ClassPrior, r_front: float, beam_b: FloatArray, beam_r: FloatArray) -> bool:

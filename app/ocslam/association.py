@@ -49,14 +49,16 @@ def associate(
             continue
         if t.boxes.get(stamp, cand.area_index) != cand.area_index:
             continue  # already seen in this frame through another box: another instance
-        d = float(np.linalg.norm(t.footprint.center - c))
+        v = t.footprint.center - c
+        d = math.sqrt(float(v.dot(v)))  # np.linalg.norm's value (its dot product), without its overhead
         match = d < thr or t.footprint.contains_point(c, margin=0.5 * thr)
         if match and len(cand.points) and t.evidence.has_points and min_distance(cand.points, t.evidence.points) > 0.5 * thr:
             # near, yet no point of it near the object's points: the LIDAR shows two things (a ball in
             # front of a partition is not the false ball behind it that its centre is close to)
             match = False
         if not match and len(cand.points):
-            match = float(np.mean(t.footprint.contains(cand.points, margin=0.5 * thr))) >= 0.5
+            # at least half of the candidate's points inside (np.mean ≥ 0.5, in integers)
+            match = 2 * int(np.count_nonzero(t.footprint.contains(cand.points, margin=0.5 * thr))) >= len(cand.points)
         if not match and cand.footprint is not None:
             match = cand.footprint.contains_point(t.footprint.center)
         if not match and (cand.source == "ground_plane" or not t.evidence.has_points) and cand.ray_origin is not None:

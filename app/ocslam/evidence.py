@@ -197,7 +197,7 @@ class ObjectEvidence:
         half-line and the object continues to its left), −1 for the right border, 0 otherwise.
         """
         d = np.asarray(direction, dtype=np.float64).reshape(2)
-        n = float(np.linalg.norm(d))
+        n = math.sqrt(float(d.dot(d)))  # np.linalg.norm's value (its dot product), without its overhead
         o = np.asarray(origin, dtype=np.float64).reshape(2)
         if n < 1e-12 or not np.isfinite(n) or not (math.isfinite(o[0]) and math.isfinite(o[1])):
             return
@@ -215,7 +215,9 @@ class ObjectEvidence:
         if m + 1 > self.max_rays:
             # keep the viewpoints spread out: drop the older ray of the closest pair of origins
             o_all = self.ray_origin
-            d2 = np.sum((o_all[:, None, :] - o_all[None, :, :]) ** 2, axis=-1)
+            dx = o_all[:, 0][:, None] - o_all[:, 0][None, :]
+            dy = o_all[:, 1][:, None] - o_all[:, 1][None, :]
+            d2 = dx * dx + dy * dy  # the squared distances as np.sum(Δ ** 2, axis=-1) adds them
             d2[_lower_triangle(len(o_all))] = np.inf
             i, _j = np.unravel_index(np.argmin(d2), d2.shape)
             keep = np.ones(len(o_all), dtype=bool)

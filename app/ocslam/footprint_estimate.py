@@ -261,7 +261,7 @@ def estimate_footprint(
         else:
             u = center0[None, :] - views
             u = u / np.maximum(np.sqrt(u[:, 0:1] * u[:, 0:1] + u[:, 1:2] * u[:, 1:2]), 1e-9)  # row norms
-            depth_axis = int(np.argmax(np.abs(u @ axes.T).mean(axis=0)))
+            depth_axis = int((np.add.reduce(np.abs(u @ axes.T), axis=0) / len(u)).argmax())  # the mean's value
     tan_axis = 1 - depth_axis if depth_axis >= 0 else -1
 
     w_app = float("nan")

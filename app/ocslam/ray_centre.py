@@ -55,8 +55,8 @@ def ray_normal_equations(
     if axes is not None:
         n, o = n @ axes.T, o @ axes.T
     w = ev.ray_weight[use]
-    off = np.sum(n * o, axis=1)
-    return n, off, (n * w[:, None]).T @ n, (n * (w * off)[:, None]).sum(axis=0)
+    off = np.add.reduce(n * o, axis=1)  # np.sum's value, without its wrapper
+    return n, off, (n * w[:, None]).T @ n, np.add.reduce(n * (w * off)[:, None], axis=0)
 
 
 def ray_centre(ev: ObjectEvidence) -> tuple[FloatArray, float] | None:

@@ -657,8 +657,7 @@ def test_objects_move_with_a_loop_closure_correction():
 
 
 def test_a_correction_reaches_the_saved_state_before_the_next_frame():
-    """The moved objects are re-estimated when first read (objects, state_dict), not at the correction: a
-    session saved between a correction and the next frame holds the moved footprints."""
+    """A session saved between a correction and the next frame holds the moved footprints."""
     ball = Cylinder(2.0, 0.0, 0.11, 0.0, 0.22)
     c = make()
     for i, T in enumerate(line(6)):

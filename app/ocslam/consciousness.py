@@ -118,10 +118,6 @@ class Consciousness:
         #: tracks moved by a correction since the last frame: re-estimated again at the next frame, with
         #: the occupancy grid built on the corrected poses (the free-space and wall checks need it)
         self._moved: dict[int, Track] = {}
-        #: tracks moved by a correction and not re-estimated since: re-estimated from their evidence alone when
-        #: read before the next frame (:meth:`_settle`), or with that frame's grid (the same footprint either way
-        #: where the grid is at hand, without estimating it twice)
-        self._unsettled: dict[int, Track] = {}
 
     # ------------------------------------------------------------------------------------------
     # public API
@@ -139,7 +135,6 @@ class Consciousness:
         """Every tracked object (any presence), in the objects' frame (``map``; ``odom`` in seed mode)."""
         if self._mode == "seed":
             return self._seed.tracked_objects("odom")
-        self._settle()
         return [export_track(t, self._anchors.poses, self.cfg) for t in self._tracks if t.footprint is not None]
 
     def visible_objects(self) -> list[TrackedObject]:
@@ -156,7 +151,6 @@ class Consciousness:
         self._last_stamp = None
         self.last_report = None
         self._moved = {}
-        self._unsettled = {}
 
     def update(
         self,
@@ -209,7 +203,6 @@ class Consciousness:
     # -- persistence ------------------------------------------------------------------------------
     def state_dict(self) -> dict[str, Any]:
         """JSON-compatible state (objects, evidence, keyframe anchors) for save/load session."""
-        self._settle()
         return {
             "version": 1,
             "mode": self._mode,
@@ -315,9 +308,7 @@ class Consciousness:
                 for track in self._tracks:
                     if self._moved.get(track.id) is track:
                         track.refresh(self._known_free)
-                        self._unsettled.pop(track.id, None)
             self._moved = {}
-        self._settle()
         dt = 0.0 if self._last_stamp is None else float(np.clip(stamp - self._last_stamp, 0.0, 1.0))
         self._last_stamp = stamp
 
@@ -464,17 +455,9 @@ class Consciousness:
         """Move every track's evidence with its keyframes; only the tracks with evidence from a moved
         keyframe are re-estimated (the others keep their footprint, and its free-space check). The
         occupancy grid at hand was built on the poses before the correction, so the moved tracks are
-        re-estimated from their evidence alone (when read before the next frame, :meth:`_settle`) and again
-        with the next frame's grid."""
+        re-estimated from their evidence alone now and again with the next frame's grid. (Now, not when
+        first read: the readers of :attr:`objects` on other threads must not re-estimate.)"""
         for t in self._tracks:
             if t.evidence.transform(deltas):
-                self._unsettled[t.id] = t
+                t.refresh()
                 self._moved[t.id] = t
-
-    def _settle(self) -> None:
-        """Re-estimate the tracks a correction moved from their evidence alone (:meth:`_apply_deltas`)."""
-        if self._unsettled:
-            for t in self._tracks:
-                if self._unsettled.get(t.id) is t:
-                    t.refresh()
-            self._unsettled = {}

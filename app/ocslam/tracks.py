@@ -222,7 +222,6 @@ class GridSpace:
 
     def __init__(self, grid: OccupancyGrid, occupied: bool = True, legs_free: bool = False) -> None:
         self._grid = grid
-        self._shape = (grid.height, grid.width)
         self.occupied: Callable[[FloatArray], NDArray[np.bool_]] | None = self._not_free if occupied else None
         #: footprints may ask it whether the legs of an object completed from one support stand in known free
         #: space (``consciousness.legs_seen_free``)
@@ -233,8 +232,7 @@ class GridSpace:
         g = self._grid
         cells = g.world_to_cell(points)
         r, c = cells[:, 0], cells[:, 1]
-        h, w = self._shape
-        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        inside = (r >= 0) & (r < g.height) & (c >= 0) & (c < g.width)
         if inside.all():
             return g.data[r, c].astype(np.int64)
         out = np.full(len(points), -1, dtype=np.int64)

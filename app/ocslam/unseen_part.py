@@ -53,10 +53,10 @@ def unseen_part_conflict(
         return 0.0
     a = linspace(float(s_center[0] - size[0] / 2 + 0.05), float(s_center[0] + size[0] / 2 - 0.05), 5)
     b = linspace(float(s_center[1] - size[1] / 2 + 0.05), float(s_center[1] + size[1] / 2 - 0.05), 5)
-    grid = np.empty((5, 5, 2))  # the 5 × 5 samples, b-major (rows of ``a``)
-    grid[:, :, 0] = a[None, :]
-    grid[:, :, 1] = b[:, None]
-    S = grid.reshape(25, 2)
+    samples = np.empty((5, 5, 2))  # the 5 × 5 samples, b-major (rows of ``a``)
+    samples[:, :, 0] = a[None, :]
+    samples[:, :, 1] = b[:, None]
+    S = samples.reshape(25, 2)
     out = ((S[:, 0] < lo[0] - _OWN_M) | (S[:, 0] > hi[0] + _OWN_M)
            | (S[:, 1] < lo[1] - _OWN_M) | (S[:, 1] > hi[1] + _OWN_M))
     if int(np.count_nonzero(out)) < 3:

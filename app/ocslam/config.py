@@ -460,6 +460,14 @@ class ConsciousnessConfig:
         "against a wall seen from the side) or kept to its points",
         live=True,
     )
+    legs_extend: bool = param(
+        True,
+        help="improved, footprints: an object seen as legs (a table's near legs) is completed away from the robot by "
+        "its class's depth even where the map saw the floor free, unless it saw free floor where its far legs would "
+        "stand: the LIDAR sees the floor under a table between its legs (false: any free band vetoes the completion, "
+        "as for a solid object's far side)",
+        live=True,
+    )
     legs_seen_free: bool = param(
         True,
         help="improved, footprints: an object that may stand on a pedestal (a table), completed from one leg-sized "

@@ -86,6 +86,9 @@ class ObjectEvidence:
         #: ``consciousness.box_width_cap`` (0: off): across the line of sight the object spans at most this
         #: many times its boxes' apparent width (:func:`app.ocslam.footprint_estimate.estimate_footprint`)
         self.box_width_cap = 0.0
+        #: ``consciousness.legs_extend``: an object seen as legs is completed over free floor unless its far legs'
+        #: places are seen free (the floor under a table is free)
+        self.legs_extend = False
         self.ray_origin = np.zeros((0, 2))
         self.ray_dir = np.zeros((0, 2))
         self.ray_weight = np.zeros(0)

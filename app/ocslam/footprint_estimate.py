@@ -171,6 +171,26 @@ def _extension_free(
     return int(np.count_nonzero(free)) / len(free) > 0.6
 
 
+def _far_legs_free(
+    known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
+) -> bool:
+    """For an object seen as legs: True if the grid knows free space where its far legs would stand, at both ends
+    of the far edge of the rectangle grown along axis ``i`` (by ``length``, towards ``direction``), each inset by
+    8 cm with its four neighbours 5 cm away (all five free). The floor between and under the legs is free anyway."""
+    if length <= 0.05 or direction == 0:
+        return False
+    j = 1 - i
+    edge = hi[i] if direction > 0 else lo[i]
+    far = edge + direction * max(length - 0.08, 0.0)
+    ends = (float(lo[j]) + 0.08, float(hi[j]) - 0.08) if hi[j] - lo[j] > 0.16 else (0.5 * float(lo[j] + hi[j]),) * 2
+    offs = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
+    rect = np.empty((2, 2))
+    rect[:, i] = far
+    rect[:, j] = ends
+    pts = ((rect[:, None, :] + offs[None, :, :]).reshape(-1, 2)) @ axes  # rectangle coordinates → object frame
+    return bool(np.asarray(known_free(pts)).reshape(2, len(offs)).all())
+
+
 def estimate_footprint(
     ev: ObjectEvidence,
     pc: ClassPrior,
@@ -334,7 +354,11 @@ def estimate_footprint(
             slack = 0.05 * d_obs[i] + 0.01
             s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
             s_prior[i] = mid[i]
-        elif known_free is not None and _extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i]):
+        elif known_free is not None and (
+            _far_legs_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
+            if legs and ev.legs_extend
+            else _extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
+        ):
             # the space it would extend into is known free: keep what was seen
             size[i] = max(d_obs[i], 0.05)
             slack = 0.05 * d_obs[i] + 0.01

@@ -441,3 +441,43 @@ def test_a_door_strip_at_the_image_edge_over_a_bookcases_side_is_the_bookcase(en
     assert collide(shelf(), _fragment_test_track(1, side, "door", 1.0, cfg)) == ["shelf", "door"]
     assert collide(shelf(), _fragment_test_track(1, side + [0.5, 0.0], "door", 0.0, cfg)) == ["shelf", "door"]
     assert collide(shelf(), _fragment_test_track(1, side, "chair", 0.0, cfg)) == ["shelf", "chair"]
+
+
+
+@pytest.mark.parametrize("check", [True, False])
+def test_a_chair_fragment_beside_a_chair_seen_whole_is_another_chair(check: bool):
+    """Principle 41 (``consciousness.fragment_width_check``). A chair seen whole from the south through boxes 0.8 m
+    wide at it, its points spread 1.2 m across (its track took something beside it, within principle 21's cap), and
+    a chair glimpsed only through boxes cut by the image border 0.3 m past their end (random dev corridor 98212,
+    YOLO: a chair at a table's end merged into a chair seen whole 2 m away). Together they fit the chair class's
+    largest instance (a 2.7 m sofa), so the fragment joined the whole chair. Across the whole chair's line of sight
+    the union spans 1.54 m, wider than its boxes showed (1.6 × 0.8 m): two chairs. A fragment at the points' end,
+    together no wider than the boxes allow, still joins it."""
+    from shapely.geometry import Polygon
+
+    from app.ocslam.candidate import FrameReport
+    from app.ocslam.collisions import resolve_track_collisions
+
+    cfg = ConsciousnessConfig()
+    cfg.fragment_width_check = check
+    front = np.array([[x, 0.7] for x in np.linspace(1.9, 3.1, 25)])
+    piece = np.array([[x, y] for x in (3.4, 3.44) for y in (0.7, 0.74)])
+
+    def chair_seen_whole():
+        c = Candidate(0, "chair", 0.9, "lidar_island", front, None, 2.0, ray_origin=np.array([2.5, -1.5]),
+                      ray_dir=np.array([0.0, 1.0]), ray_weight=1.0, apparent_width=0.8)
+        t = create_track(0, c, 0.0, -1, cfg, None)
+        t.evidence.box_width_cap = float(cfg.box_width_cap)
+        return t
+
+    def collide(*tracks):
+        rep = FrameReport(1.0, "improved", "map", Pose2(), np.zeros((0, 2)), Polygon())
+        return resolve_track_collisions(list(tracks), list(tracks), 1.0, cfg, None, rep)
+
+    fragment = _fragment_test_track(1, piece, "chair", 0.0, cfg)
+    near = _fragment_test_track(2, piece - np.array([0.28, 0.0]), "chair", 0.0, cfg)  # at the points' end
+    for t in (fragment, near):
+        t.evidence.box_width_cap = float(cfg.box_width_cap)  # as the loop sets it on every object it sees
+    assert fragment.partial_only
+    assert len(collide(chair_seen_whole(), fragment)) == (2 if check else 1)
+    assert len(collide(chair_seen_whole(), near)) == 1

@@ -421,6 +421,8 @@ def resolve_track_collisions(
                     same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=typical)
                     if same and cfg.gap_seen_free and gap_seen_free(a.evidence.points, b.evidence.points, a.prior, known_free):
                         same = False  # the map saw free floor between them: two objects
+                    if same and cfg.fragment_width_check and wider_than_boxes(a, b, np.vstack([strong_points(a), strong_points(b)])):
+                        same = False  # together wider than their whole boxes showed either: two objects
                 if not same and (not a.evidence.has_points or not b.evidence.has_points):
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)
                     if len(gp.evidence.ray_origin):

@@ -453,6 +453,14 @@ class ConsciousnessConfig:
         "showed (box_width_cap): two dining chairs' points fit the chair class's sofa, their boxes do not",
         live=True,
     )
+    fragment_width_check: bool = param(
+        True,
+        help="improved: pieces of one object joined across a gap (a fragment seen only through border-cut boxes and a "
+        "neighbour of its class) are one object only if together they are no wider across most of their lines of sight "
+        "than their whole boxes showed (box_width_cap): a chair glimpsed at the image's edge 2 m from a chair seen whole "
+        "fits the chair class's largest sofa, the whole chair's boxes do not",
+        live=True,
+    )
     hidden_behind_own_face: bool = param(
         True,
         help="improved, footprints: the part of an object its points do not show lies behind its own face, not behind "

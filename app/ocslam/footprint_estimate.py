@@ -26,6 +26,8 @@ FloatArray = NDArray[np.float64]
 _STRAY_M = 0.3
 #: A voxel seen in this many frames is the object's, however often its best voxel was seen (principle 39).
 _STRAY_MIN_HITS = 3
+#: A leg's place on the grid: its point and four neighbours 5 cm away, all known free for "seen free" (m).
+_LEG_PLACE = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
 
 
 def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
@@ -115,9 +117,8 @@ def _legs_seen_free(known_free: FreeFn, fp: Footprint, pts: FloatArray, leg: flo
     n_far = int(np.count_nonzero(far))
     if n_far < 2:
         return False
-    offs = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
-    samples = (corners[far][:, None, :] + offs[None, :, :]).reshape(-1, 2)
-    free = np.asarray(known_free(samples)).reshape(n_far, len(offs)).all(axis=1)
+    samples = (corners[far][:, None, :] + _LEG_PLACE[None, :, :]).reshape(-1, 2)
+    free = np.asarray(known_free(samples)).reshape(n_far, len(_LEG_PLACE)).all(axis=1)
     return int(np.count_nonzero(free)) >= 2
 
 
@@ -183,12 +184,11 @@ def _far_legs_free(
     edge = hi[i] if direction > 0 else lo[i]
     far = edge + direction * max(length - 0.08, 0.0)
     ends = (float(lo[j]) + 0.08, float(hi[j]) - 0.08) if hi[j] - lo[j] > 0.16 else (0.5 * float(lo[j] + hi[j]),) * 2
-    offs = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
     rect = np.empty((2, 2))
     rect[:, i] = far
     rect[:, j] = ends
-    pts = ((rect[:, None, :] + offs[None, :, :]).reshape(-1, 2)) @ axes  # rectangle coordinates → object frame
-    return bool(np.asarray(known_free(pts)).reshape(2, len(offs)).all())
+    pts = ((rect[:, None, :] + _LEG_PLACE[None, :, :]).reshape(-1, 2)) @ axes  # rectangle coordinates → object frame
+    return bool(np.asarray(known_free(pts)).reshape(2, len(_LEG_PLACE)).all())
 
 
 def estimate_footprint(

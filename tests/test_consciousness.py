@@ -278,6 +278,21 @@ def test_two_sofas_side_by_side_seen_through_two_boxes_stay_two():
             assert abs(o.pose.x - s.x) <= 0.55 and abs(o.pose.y - s.y) <= 0.95  # on its own sofa
 
 
+@pytest.mark.parametrize("far_face", [True, False])
+def test_a_bookcase_seen_through_its_open_front_stands_before_its_far_panel(far_face: bool):
+    """An open bookcase 1 m deep whose only surface at the LIDAR's height is its far panel (x = 3.3; its plinth is
+    lower, its top higher): the box's bottom edge meets the floor at its plinth, 1 m nearer than the panel's
+    points. With ``far_face`` the bookcase stands between the two; without it, it is completed behind the panel."""
+    panel = Box(3.29, 0.0, 0.02, 0.4, 0.0, 0.0, 1.8)
+    top = Box(2.8, 0.0, 1.0, 0.4, 0.0, 1.75, 1.8)
+    plinth = Box(2.32, 0.0, 0.04, 0.4, 0.0, 0.0, 0.05)
+    c = make(far_face=far_face)
+    drive(c, [panel, top, plinth], [("shelf", [panel, top, plinth])], line(6))
+    (o,) = by_label(c.visible_objects(), "shelf")
+    assert (o.pose.x < 3.29) is far_face
+    assert abs(o.pose.y) < 0.05
+
+
 def test_footprint_not_extended_into_known_free_space():
     """Seen from one side, a shelf is completed to its depth behind the visible face; but not into
     space the occupancy grid has seen empty (the face was its far side: an open shelf seen from inside)."""

@@ -72,6 +72,7 @@ def area_candidate(
         b_closed = (area.bearing_right if open_side > 0 else area.bearing_left) + T_map_scan.yaw
         closed_edge = np.array([ray_o, [open_side * math.sin(b_closed), -open_side * math.cos(b_closed)]])
     near = area.near_range_m if np.isfinite(area.near_range_m) else math.inf
+    base = float(area.near_range_m) if area.bottom_reliable else float("nan")  # where its base begins
 
     islands: list[Island] = []
     if not pc.below_plane(z_lidar) and len(idx):
@@ -208,7 +209,7 @@ def area_candidate(
             app = _apparent_width(pts_scan, area, cam)  # at the group's nearest point
         ev = ObjectEvidence()
         ev.add_points(pts_map)
-        ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app, open_side=open_side)  # cut box: a viewpoint only
+        ev.add_ray(ray_o, ray_d, ray_w, apparent_width=app, open_side=open_side, base_range=base)  # cut box: a viewpoint only
         support: bool | None = None
         legs = pc.legged and all(islands[g].physical_extent <= pc.leg_size_max for g in group)
         ev.observations, ev.leg_obs = 1, int(legs)
@@ -231,6 +232,7 @@ def area_candidate(
                 ray_dir=ray_d,
                 ray_weight=ray_w,
                 apparent_width=app,
+                base_range=base,
                 support=support,
                 legs=legs,
                 open_side=open_side,

@@ -37,6 +37,7 @@ class Candidate:
     ray_weight: float = 0.0
     ground_center: FloatArray | None = None
     apparent_width: float = float("nan")  # the box's width at the island's range (m), NaN if cut by the border
+    base_range: float = float("nan")  # the range of the box's bottom edge on the floor from the ray's origin (m), NaN if cut
     support: bool | None = None  # legged classes: one small island on the centre line (a pedestal); None: not legged, or no telling (area_candidate._support)
     legs: bool = False  # legged classes: every chosen island is leg-sized
     open_side: int = 0  # +1/-1: the box is cut by the image's left/right border only

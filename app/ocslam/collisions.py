@@ -254,7 +254,8 @@ def resolve_frame_collisions(cands: list[Candidate | None], cfg: ConsciousnessCo
                         ev = ObjectEvidence()
                         ev.add_points(a.points)
                         if a.ray_origin is not None and a.ray_dir is not None:
-                            ev.add_ray(a.ray_origin, a.ray_dir, max(a.ray_weight, 0.2), apparent_width=a.apparent_width)
+                            ev.add_ray(a.ray_origin, a.ray_dir, max(a.ray_weight, 0.2), apparent_width=a.apparent_width,
+                                       base_range=a.base_range)
                         a.footprint = estimate_footprint(ev, prior(a.label)) or a.footprint
                     b.status = "collision"
                     rep.reject("merged_in_frame")

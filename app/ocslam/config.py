@@ -468,6 +468,13 @@ class ConsciousnessConfig:
         "against a wall seen from the side) or kept to its points",
         live=True,
     )
+    far_face: bool = param(
+        True,
+        help="improved, footprints: an open frame (a bookcase) seen as one face from one side is completed towards the "
+        "robot, not away from it, when its boxes' bottom edges put its base more than half its depth nearer than that "
+        "face: the LIDAR saw through its open front to its far side panel (false: always away from the robot)",
+        live=True,
+    )
     legs_extend: bool = param(
         True,
         help="improved, footprints: an object seen as legs (a table's near legs) is completed away from the robot by "

@@ -86,6 +86,9 @@ class ObjectEvidence:
         #: ``consciousness.box_width_cap`` (0: off): across the line of sight the object spans at most this
         #: many times its boxes' apparent width (:func:`app.ocslam.footprint_estimate.estimate_footprint`)
         self.box_width_cap = 0.0
+        #: ``consciousness.far_face``: an open frame's face returned well beyond where its boxes' bottom edges put its
+        #: base is its far side (:func:`app.ocslam.footprint_estimate.estimate_footprint`)
+        self.far_face = False
         #: ``consciousness.legs_extend``: an object seen as legs is completed over free floor unless its far legs'
         #: places are seen free (the floor under a table is free)
         self.legs_extend = False
@@ -95,6 +98,7 @@ class ObjectEvidence:
         self.ray_kf = np.zeros(0, dtype=np.int64)
         self.ray_app = np.zeros(0)  # apparent width seen along each ray (m), NaN if unknown
         self.ray_open = np.zeros(0, dtype=np.int64)  # +1/-1: box cut by the image's left/right border
+        self.ray_base = np.zeros(0)  # the range of the box's bottom edge on the floor from the origin (m), NaN if unknown
         self.gp_center: FloatArray | None = None
         self.gp_kf: int = NO_KEYFRAME
         #: legged classes: observations as one small island on the box's centre line vs. off it / several legs
@@ -192,12 +196,15 @@ class ObjectEvidence:
         decay: float = 1.0,
         apparent_width: float = float("nan"),
         open_side: int = 0,
+        base_range: float = float("nan"),
     ) -> None:
         """Add a bisector ray (object frame); older rays' weights are multiplied by ``decay`` first.
 
         ``apparent_width``: the object's width across the ray as the box shows it (m), NaN if unknown.
         ``open_side``: +1 if the box was cut by the image's left border (the ray is then that border's
         half-line and the object continues to its left), −1 for the right border, 0 otherwise.
+        ``base_range``: how far along the ray the box's bottom edge meets the floor (where the object's base
+        begins, m), NaN if the box is cut by the image's bottom or unknown.
         """
         d = np.asarray(direction, dtype=np.float64).reshape(2)
         n = math.sqrt(float(d.dot(d)))  # np.linalg.norm's value (its dot product), without its overhead
@@ -215,6 +222,7 @@ class ObjectEvidence:
         self.ray_kf = _appended(self.ray_kf, int(kf))
         self.ray_app = _appended(self.ray_app, float(apparent_width))
         self.ray_open = _appended(self.ray_open, int(open_side))
+        self.ray_base = _appended(self.ray_base, float(base_range))
         if m + 1 > self.max_rays:
             # keep the viewpoints spread out: drop the older ray of the closest pair of origins
             o_all = self.ray_origin
@@ -227,7 +235,7 @@ class ObjectEvidence:
             keep[i] = False
             self.ray_origin, self.ray_dir = self.ray_origin[keep], self.ray_dir[keep]
             self.ray_weight, self.ray_kf, self.ray_app = self.ray_weight[keep], self.ray_kf[keep], self.ray_app[keep]
-            self.ray_open = self.ray_open[keep]
+            self.ray_open, self.ray_base = self.ray_open[keep], self.ray_base[keep]
 
     def add_ground_center(self, center: FloatArray, weight_old: float, kf: int = NO_KEYFRAME) -> None:
         """Rolling average of ground-plane centres: ``c ← w·c + (1 − w)·new`` (paper's 90 %)."""
@@ -247,8 +255,9 @@ class ObjectEvidence:
                 out = np.zeros(int(h.sum()), dtype=np.int64)
                 out[np.concatenate([[0], np.cumsum(h)[:-1]])] = other.outside[m]
                 self.add_points(np.repeat(other.points[m], h, axis=0), int(k), out)
-        for o, d, w, k, a, op in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app, other.ray_open):
-            self.add_ray(o, d, float(w), int(k), apparent_width=float(a), open_side=int(op))
+        for o, d, w, k, a, op, br in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app,
+                                         other.ray_open, other.ray_base):
+            self.add_ray(o, d, float(w), int(k), apparent_width=float(a), open_side=int(op), base_range=float(br))
         self.support_obs += other.support_obs
         self.corner_obs += other.corner_obs
         self.observations += other.observations
@@ -347,6 +356,7 @@ class ObjectEvidence:
             "ray_kf": self.ray_kf.tolist(),
             "ray_app": [None if not np.isfinite(a) else float(a) for a in self.ray_app],
             "ray_open": self.ray_open.tolist(),
+            "ray_base": [None if not np.isfinite(b) else float(b) for b in self.ray_base],
             "gp_center": None if self.gp_center is None else self.gp_center.tolist(),
             "gp_kf": self.gp_kf,
             "support_obs": self.support_obs,
@@ -373,6 +383,12 @@ class ObjectEvidence:
             if app is None
             else np.array([np.nan if a is None else float(a) for a in app], dtype=np.float64)
         )
+        base = d.get("ray_base")  # absent in states saved before it: unknown
+        e.ray_base = (
+            np.full(len(e.ray_kf), np.nan)
+            if base is None
+            else np.array([np.nan if b is None else float(b) for b in base], dtype=np.float64)
+        )
         gp = d.get("gp_center")
         e.gp_center = None if gp is None else np.asarray(gp, dtype=np.float64).reshape(2)
         e.gp_kf = int(d.get("gp_kf", NO_KEYFRAME))
@@ -381,7 +397,7 @@ class ObjectEvidence:
         e.observations = int(d.get("observations", 0))
         e.leg_obs = int(d.get("leg_obs", 0))
         if not (len(e.points) == len(e.hits) == len(e.point_kf) == len(e.outside)) or not (
-            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open)
+            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open) == len(e.ray_base)
         ):
             raise ValueError("object evidence: array lengths differ")
         return e

@@ -108,6 +108,18 @@ def _centred(center: FloatArray, th: float, d_obs: FloatArray, pc: ClassPrior, w
     return Footprint(center, th, float(max(d_obs[0], a if first else b)), float(max(d_obs[1], b if first else a)))
 
 
+def _base_before(ev: ObjectEvidence, axis: FloatArray, face: float, side: int) -> float:
+    """How far in front of the face at ``face`` along ``axis`` (``(2,)``, the viewpoints on its ``side`` ±1) the
+    boxes' bottom edges put the object's base: the median over the rays that know it (``ev.ray_base``) of the
+    distance, along ``axis``, from the face to where each ray meets the floor under its box's bottom edge
+    (positive: nearer the viewpoints than the face; −inf if no ray knows it)."""
+    m = np.isfinite(ev.ray_base)
+    if not m.any():
+        return -math.inf
+    base = ev.ray_origin[m] + ev.ray_base[m][:, None] * ev.ray_dir[m]
+    return _median(side * (base @ axis - face))
+
+
 def _legs_seen_free(known_free: FreeFn, fp: Footprint, pts: FloatArray, leg: float) -> bool:
     """True if the grid knows free space at two of the footprint's corners that lie farther than ``leg`` from
     every point, where a legged object's other legs would stand (each corner inset by 8 cm, with its four
@@ -369,6 +381,10 @@ def estimate_footprint(
             sgn = side[i]
             face = hi[i] if sgn > 0 else lo[i]
             t_nom, t_min, t_max = max(d_obs[i], dep_nom), max(d_obs[i], dep_min), max(d_obs[i], dep_max)
+            if ev.far_face and pc.open_span and not pc.on_wall and _base_before(ev, axes[i], face, sgn) > 0.5 * t_nom:
+                # an open frame's far side seen through its open front: it extends towards the robot
+                sgn = -sgn
+                face = hi[i] if sgn > 0 else lo[i]
             size[i] = t_nom
             c_min, c_max = face - sgn * t_min / 2, face - sgn * t_max / 2
             s_lo[i], s_hi[i] = min(c_min, c_max), max(c_min, c_max)

@@ -380,7 +380,8 @@ def add_evidence(ev: ObjectEvidence, cand: Candidate, kf: int, cfg: Consciousnes
         ev.add_ground_center(cand.ground_center, w, kf)
     if cand.ray_origin is not None and cand.ray_dir is not None:
         ev.add_ray(
-            cand.ray_origin, cand.ray_dir, cand.ray_weight, kf, decay=w, apparent_width=cand.apparent_width, open_side=cand.open_side
+            cand.ray_origin, cand.ray_dir, cand.ray_weight, kf, decay=w, apparent_width=cand.apparent_width, open_side=cand.open_side,
+            base_range=cand.base_range,
         )
 
 

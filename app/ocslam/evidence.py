@@ -397,7 +397,8 @@ class ObjectEvidence:
         e.observations = int(d.get("observations", 0))
         e.leg_obs = int(d.get("leg_obs", 0))
         if not (len(e.points) == len(e.hits) == len(e.point_kf) == len(e.outside)) or not (
-            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open) == len(e.ray_base)
+            len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open)
+            == len(e.ray_base)
         ):
             raise ValueError("object evidence: array lengths differ")
         return e

@@ -218,7 +218,9 @@ def estimate_footprint(
        means part of the object was hidden or is not at the LIDAR height (legs); points spread wider
        than ``ev.box_width_cap`` times it (``consciousness.box_width_cap``) are partly something else's.
     3. Seen from one side only, the object extends away from the robot by the depth of the typical
-       footprint whose face matches its width (:func:`depth_for_width`).
+       footprint whose face matches its width (:func:`depth_for_width`) — or, for an open frame whose boxes'
+       bottom edges put its base more than half that depth in front of the face (``ev.far_face``,
+       :func:`_base_before`), towards the robot: the face was its far side, seen through its open front.
     4. The centre is the least-squares crossing of the bisector rays, constrained to the interval the
        points and sizes allow on each axis.
 

@@ -76,12 +76,13 @@ def one_instance(
     pa, pb = strong_points(a), strong_points(b)
     if len(pa) == 0 or len(pb) == 0:
         return True
-    _th, lo, hi = min_area_rect(np.vstack([pa, pb]))
+    both = np.vstack([pa, pb])
+    _th, lo, hi = min_area_rect(both)
     d = hi - lo
     pc = a.prior
     if not fits_instance(pc, float(d[0]), float(d[1]), typical=not (fragment_fits_largest and (a.partial_only or b.partial_only))):
         return False
-    if box_widths and wider_than_boxes(a, b, np.vstack([pa, pb])):
+    if box_widths and wider_than_boxes(a, b, both):
         return False
     if pc.legged and float(max(d)) > pc.leg_size_max * 1.5 and any(
         pedestal(t.evidence, p, pc, pedestal_fraction) for t, p in ((a, pa), (b, pb))
@@ -91,14 +92,18 @@ def one_instance(
     return not legs or pc.legs_fit(float(d[0]), float(d[1]))
 
 
-def wider_than_boxes(a: Track, b: Track, points: FloatArray) -> bool:
-    """True if ``points`` ``(N, 2)`` (map frame) spread wider across most of the two objects' lines of sight than
+def wider_than_boxes(a: Track, b: Track, points: FloatArray | None = None) -> bool:
+    """True if ``points`` ``(N, 2)`` (map frame; by default both objects' :func:`strong_points`) spread wider across most of the two objects' lines of sight than
     their boxes showed there: principle 21's cap (``box_width_cap`` × a box's apparent width, and 0.2 m more) for
     each bisector ray of a box not cut by the image border. The class's shapes reach from a dining chair to a
     2.2 m sofa, so two chairs' points may fit "one chair"; their boxes, each a chair wide, say otherwise.
     False when the cap is off or no ray knows its box's width."""
     k = float(a.evidence.box_width_cap)
-    if k <= 0.0 or len(points) == 0:
+    if k <= 0.0:
+        return False
+    if points is None:
+        points = np.vstack([strong_points(a), strong_points(b)])
+    if len(points) == 0:
         return False
     dirs, widths = [], []
     for ev in (a.evidence, b.evidence):
@@ -422,7 +427,7 @@ def resolve_track_collisions(
                     same = contiguous(a.evidence.points, b.evidence.points, a.prior, gap, typical=typical)
                     if same and cfg.gap_seen_free and gap_seen_free(a.evidence.points, b.evidence.points, a.prior, known_free):
                         same = False  # the map saw free floor between them: two objects
-                    if same and cfg.fragment_width_check and wider_than_boxes(a, b, np.vstack([strong_points(a), strong_points(b)])):
+                    if same and cfg.fragment_width_check and wider_than_boxes(a, b):
                         same = False  # together wider than their whole boxes showed either: two objects
                 if not same and (not a.evidence.has_points or not b.evidence.has_points):
                     (gp, gp_fp), other_fp = ((a, fa), fb) if not a.evidence.has_points else ((b, fb), fa)

@@ -60,6 +60,18 @@ def _lower_triangle(n: int) -> NDArray[np.bool_]:
     return m
 
 
+def _nan_list(v: FloatArray) -> list[float | None]:
+    """``(N,)`` floats as JSON: NaN (unknown) as ``None``."""
+    return [None if not np.isfinite(x) else float(x) for x in v]
+
+
+def _nan_array(items: list | None, n: int) -> FloatArray:
+    """:func:`_nan_list`'s inverse; ``n`` NaNs (all unknown) when ``items`` is absent (an older state)."""
+    if items is None:
+        return np.full(n, np.nan)
+    return np.array([np.nan if x is None else float(x) for x in items], dtype=np.float64)
+
+
 class ObjectEvidence:
     """What one tracked object has accumulated: points, bisector rays and ground-plane centres.
 
@@ -354,9 +366,9 @@ class ObjectEvidence:
             "ray_dir": self.ray_dir.tolist(),
             "ray_weight": self.ray_weight.tolist(),
             "ray_kf": self.ray_kf.tolist(),
-            "ray_app": [None if not np.isfinite(a) else float(a) for a in self.ray_app],
+            "ray_app": _nan_list(self.ray_app),
             "ray_open": self.ray_open.tolist(),
-            "ray_base": [None if not np.isfinite(b) else float(b) for b in self.ray_base],
+            "ray_base": _nan_list(self.ray_base),
             "gp_center": None if self.gp_center is None else self.gp_center.tolist(),
             "gp_kf": self.gp_kf,
             "support_obs": self.support_obs,
@@ -377,18 +389,8 @@ class ObjectEvidence:
         e.ray_weight = np.asarray(d.get("ray_weight", []), dtype=np.float64).reshape(-1)
         e.ray_kf = np.asarray(d.get("ray_kf", []), dtype=np.int64).reshape(-1)
         e.ray_open = np.asarray(d.get("ray_open", [0] * len(e.ray_kf)), dtype=np.int64).reshape(-1)
-        app = d.get("ray_app")
-        e.ray_app = (
-            np.full(len(e.ray_kf), np.nan)
-            if app is None
-            else np.array([np.nan if a is None else float(a) for a in app], dtype=np.float64)
-        )
-        base = d.get("ray_base")  # absent in states saved before it: unknown
-        e.ray_base = (
-            np.full(len(e.ray_kf), np.nan)
-            if base is None
-            else np.array([np.nan if b is None else float(b) for b in base], dtype=np.float64)
-        )
+        e.ray_app = _nan_array(d.get("ray_app"), len(e.ray_kf))
+        e.ray_base = _nan_array(d.get("ray_base"), len(e.ray_kf))  # absent in states saved before it: unknown
         gp = d.get("gp_center")
         e.gp_center = None if gp is None else np.asarray(gp, dtype=np.float64).reshape(2)
         e.gp_kf = int(d.get("gp_kf", NO_KEYFRAME))

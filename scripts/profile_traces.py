@@ -9,6 +9,7 @@ model's score calibration (:func:`replay_config`), and each world once per detec
     python scripts/profile_traces.py                       # the cached zoo-dev traces, default config
     python scripts/profile_traces.py --suite zoo-test      # the held-out half (only report it)
     python scripts/profile_traces.py --profile 30          # + cProfile, top 30 functions by own time
+    python scripts/profile_traces.py --profile 30 --sort cumulative   # ... by time with callees
     python scripts/profile_traces.py --set consciousness.island_threshold_m=0.2
     python scripts/profile_traces.py --detector oracle --misses   # the oracle recordings, each miss and FP (dev only)
     python scripts/profile_traces.py --suite zoo-test --causes    # the suite's misses counted by cause (no per-object rows)
@@ -178,6 +179,8 @@ def main() -> int:
                     help="count the suite's false negatives by cause and false positives by kind (a table, no per-object rows)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     ap.add_argument("--profile", type=int, default=0, metavar="N", help="print the top N functions (own time)")
+    ap.add_argument("--sort", choices=("tottime", "cumulative"), default="tottime",
+                    help="the profile's order: own time (default) or time with callees")
     a = ap.parse_args()
     files = [Path(p) for p in a.traces] or suite_traces(a.suite, a.detector, a.model, a.cache)
     if not files:
@@ -220,7 +223,7 @@ def main() -> int:
     if a.causes:
         print("causes: " + ", ".join(f"{k} {v}" for k, v in sorted(causes.items())))
     if prof:
-        pstats.Stats(prof).sort_stats("tottime").print_stats(a.profile)
+        pstats.Stats(prof).sort_stats(a.sort).print_stats(a.profile)
     return 0
 
 

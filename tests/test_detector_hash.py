@@ -101,3 +101,20 @@ def test_verify_hash_is_a_config_field() -> None:
     assert cfg.detector.verify_hash is True
     cfg.set("detector.verify_hash", False)
     assert cfg.detector.verify_hash is False
+
+
+def test_a_card_is_parsed_once_and_read_again_when_it_changes(tmp_path: Path) -> None:
+    # A sweep asks for the card's calibration once per replayed trace: the parse is kept while the file is
+    # unchanged, each caller gets its own copy, and an edited card is read again.
+    model = tmp_path / "m.onnx"
+    model.write_bytes(b"weights")
+    card = tmp_path / "m.yaml"
+    card.write_text(yaml.safe_dump({"model": {"file": "m.onnx", "sha256": "a" * 64}}))
+    first = find_model_card(model)
+    assert first is not None and first[1]["sha256"] == "a" * 64
+    first[1]["sha256"] = "mutated by a caller"
+    assert find_model_card(model)[1]["sha256"] == "a" * 64
+    card.write_text(yaml.safe_dump({"model": {"file": "m.onnx", "sha256": "b" * 64, "note": "edited"}}))
+    assert find_model_card(model)[1]["sha256"] == "b" * 64
+    card.write_text("[1, 2]")  # no longer a mapping: it describes nothing
+    assert find_model_card(model) is None

@@ -199,6 +199,8 @@ MODELS_DIR = Path(__file__).resolve().parents[2] / "assets" / "models"
 #: file_sha256's results by (path, size, modification time): a model is hashed once per process, however
 #: often its card, its calibration or a sweep's recording key asks for it
 _SHA256: dict[tuple[str, int, int], str] = {}
+#: _read_card's parsed cards by (path, size, modification time) (None: not a mapping)
+_CARDS: dict[tuple[str, int, int], dict | None] = {}
 
 
 def file_sha256(path: Path) -> str:
@@ -225,6 +227,24 @@ def _card_entries(card: dict) -> list[dict]:
     return entries
 
 
+def _read_card(path: Path) -> dict | None:
+    """A model card's YAML as a dict (a fresh copy), or None if unreadable or not a mapping; the parse is
+    cached while the file's size and modification time stay the same (a sweep replays hundreds of traces)."""
+    import copy
+
+    import yaml
+
+    try:
+        st = path.stat()
+        key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+        if key not in _CARDS:
+            card = yaml.safe_load(path.read_text())
+            _CARDS[key] = card if isinstance(card, dict) else None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None
+    return copy.deepcopy(_CARDS[key])
+
+
 def find_model_card(model: Path) -> tuple[Path, dict] | None:
     """The card that describes ``model`` and its entry (``file``, ``sha256``, ...), or None.
 
@@ -232,18 +252,13 @@ def find_model_card(model: Path) -> tuple[Path, dict] | None:
     a ``model`` or ``variants[]`` entry whose ``file`` is the model's file name. Unreadable YAML files
     are skipped (they describe nothing).
     """
-    import yaml
-
     model = Path(model)
     folder = model.parent
     first = model.with_suffix(".yaml")
     candidates = ([first] if first.is_file() else []) + sorted(p for p in folder.glob("*.yaml") if p != first)
     for card_path in candidates:
-        try:
-            card = yaml.safe_load(card_path.read_text())
-        except (OSError, UnicodeDecodeError, yaml.YAMLError):
-            continue
-        if not isinstance(card, dict):
+        card = _read_card(card_path)
+        if card is None:
             continue
         for entry in _card_entries(card):
             if str(entry.get("file", "")) == model.name:

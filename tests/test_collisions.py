@@ -10,9 +10,9 @@ from scipy.spatial import cKDTree
 from app.ocslam.classes import prior
 from app.ocslam.collisions import shared_fractions
 from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.free_space import GridSpace, gap_seen_free
 from app.ocslam.messages import OccupancyGrid
 from app.ocslam.se2 import Pose2
-from app.ocslam.tracks import GridSpace, gap_seen_free
 
 
 def test_shared_fractions_equal_the_kd_trees_on_the_gap_too() -> None:
@@ -109,9 +109,10 @@ def test_a_pedestal_joins_no_points_beside_it(fraction: float):
     from shapely.geometry import Polygon
 
     from app.ocslam.candidate import Candidate, FrameReport
-    from app.ocslam.collisions import one_instance, resolve_frame_collisions
+    from app.ocslam.collisions import one_instance
     from app.ocslam.config import ConsciousnessConfig
     from app.ocslam.footprint import Footprint
+    from app.ocslam.frame_collisions import resolve_frame_collisions
     from app.ocslam.se2 import Pose2
 
     ped, stool = _square(3.4, 0.9), np.vstack([_square(3.95 + 0.26 * i, 0.77 + 0.26 * j) for i in range(2) for j in range(2)])
@@ -274,7 +275,7 @@ def test_pieces_of_one_sofa_seen_apart_across_free_floor_stay_two():
 
 
 def test_side_by_side_known_answers():
-    from app.ocslam.collisions import side_by_side
+    from app.ocslam.frame_collisions import side_by_side
 
     assert side_by_side((0.0, 38.0), (23.0, 68.0))          # overlapping, each reaching beyond the other
     assert side_by_side((23.0, 68.0), (0.0, 38.0))          # in either order

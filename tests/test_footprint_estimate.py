@@ -16,9 +16,9 @@ from app.ocslam.classes import CLASS_PRIORS
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint import min_area_rect
 from app.ocslam.footprint_estimate import estimate_footprint
+from app.ocslam.free_space import GridSpace
 from app.ocslam.messages import OccupancyGrid
 from app.ocslam.se2 import Pose2
-from app.ocslam.tracks import GridSpace
 from app.ocslam.unseen_part import unseen_part_conflict
 
 WALL_Y = (7.25, 7.35)  # the wall's cells (its face at 7.25 m)

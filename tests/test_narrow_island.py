@@ -9,8 +9,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.ocslam.area_candidate import _narrower_than_class
 from app.ocslam.classes import prior
+from app.ocslam.island_checks import narrower_than_class
 
 INC = 2.0 * math.pi / 360.0  # one-degree beams
 BEAMS = np.arange(-math.pi, math.pi, INC)
@@ -28,25 +28,25 @@ K0 = len(BEAMS) // 2  # the beam at bearing 0
 
 def test_a_leg_seen_past_on_both_sides_is_no_gnome():
     r = _scan({K0: 3.0})
-    assert _narrower_than_class(BEAMS[[K0]], prior("gnome"), 3.0, BEAMS, r)
+    assert narrower_than_class(BEAMS[[K0]], prior("gnome"), 3.0, BEAMS, r)
 
 
 def test_known_answers_that_keep_the_island():
     gnome = prior("gnome")
     # a nearer return beside it hides what may continue there
-    assert not _narrower_than_class(BEAMS[[K0]], gnome, 3.0, BEAMS, _scan({K0: 3.0, K0 + 1: 2.0}))
+    assert not narrower_than_class(BEAMS[[K0]], gnome, 3.0, BEAMS, _scan({K0: 3.0, K0 + 1: 2.0}))
     # a return at its range beside it continues it (a wider object)
-    assert not _narrower_than_class(BEAMS[[K0]], gnome, 3.0, BEAMS, _scan({K0: 3.0, K0 - 1: 3.05}))
+    assert not narrower_than_class(BEAMS[[K0]], gnome, 3.0, BEAMS, _scan({K0: 3.0, K0 - 1: 3.05}))
     # a wall close behind it: not seen past
-    assert not _narrower_than_class(BEAMS[[K0]], gnome, 3.0, BEAMS, _scan({K0: 3.0}, background=3.3))
+    assert not narrower_than_class(BEAMS[[K0]], gnome, 3.0, BEAMS, _scan({K0: 3.0}, background=3.3))
     # as wide as a gnome: five points at 3 m span 0.2 m
     ks = list(range(K0 - 2, K0 + 3))
-    assert not _narrower_than_class(BEAMS[ks], gnome, 3.0, BEAMS, _scan({k: 3.0 for k in ks}))
+    assert not narrower_than_class(BEAMS[ks], gnome, 3.0, BEAMS, _scan({k: 3.0 for k in ks}))
     # legged classes have legs that thin; doors stand in walls
     for name in ("table", "chair", "dog", "person", "door"):
-        assert not _narrower_than_class(BEAMS[[K0]], prior(name), 3.0, BEAMS, _scan({K0: 3.0}))
+        assert not narrower_than_class(BEAMS[[K0]], prior(name), 3.0, BEAMS, _scan({K0: 3.0}))
     # far away the beams are too coarse to tell (no beam within the narrowest gnome's span)
-    assert not _narrower_than_class(BEAMS[[K0]], gnome, 5.0, BEAMS, _scan({K0: 5.0}, background=12.0))
+    assert not narrower_than_class(BEAMS[[K0]], gnome, 5.0, BEAMS, _scan({K0: 5.0}, background=12.0))
 
 
 @settings(max_examples=60, deadline=None)
@@ -57,7 +57,7 @@ def test_an_island_as_wide_as_the_class_is_never_rejected(k, r, name):
     half = 0.5 * max(pc.width[0], 0.6 * pc.width[1]) / r
     ks = [j for j in range(len(BEAMS)) if abs(BEAMS[j] - BEAMS[k]) <= half + 1e-9]
     hit = _scan({j: r for j in ks})
-    assert not _narrower_than_class(BEAMS[ks], pc, r, BEAMS, hit)
+    assert not narrower_than_class(BEAMS[ks], pc, r, BEAMS, hit)
 
 
 def test_a_stools_legs_in_front_of_a_far_gnome_are_not_the_gnome():

@@ -24,11 +24,12 @@ from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint import Footprint
 from app.ocslam.footprint_estimate import estimate_footprint
+from app.ocslam.free_space import GridSpace
 from app.ocslam.messages import CLASS_INDEX, Detection, Detections, OccupancyGrid
 from app.ocslam.outside import lidar_sees, seen_outside
 from app.ocslam.projection import bounding_areas
 from app.ocslam.se2 import Pose2
-from app.ocslam.tracks import GridSpace, create_track
+from app.ocslam.tracks import create_track
 
 CAM = default_camera()
 

@@ -15,18 +15,11 @@ import numpy as np
 from app.ocslam.candidate import Candidate
 from app.ocslam.classes import prior
 from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.free_space import FreeFn, gap_seen_free
 from app.ocslam.projection import BoundingArea
+from app.ocslam.proximity import along_ray_close, angle_wrap, contiguous, min_distance
 from app.ocslam.se2 import Pose2
-from app.ocslam.tracks import (
-    FreeFn,
-    Sighting,
-    Track,
-    along_ray_close,
-    angle_wrap,
-    contiguous,
-    gap_seen_free,
-    min_distance,
-)
+from app.ocslam.tracks import Sighting, Track
 
 
 def associate(

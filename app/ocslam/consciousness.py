@@ -52,14 +52,15 @@ from app.ocslam.association import associate, bearing_match, sighting, wide_box
 from app.ocslam.calibration import ScoreCalibration
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
-from app.ocslam.collisions import (
+from app.ocslam.collisions import resolve_track_collisions
+from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.frame_collisions import (
     islands_apart,
     one_island_class,
     ownership_order,
     resolve_frame_collisions,
-    resolve_track_collisions,
 )
-from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.free_space import grid_free_fn
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.islands import close_pairs, cluster_extents
 from app.ocslam.keyframe_anchors import KeyframeAnchors
@@ -67,20 +68,12 @@ from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, O
 from app.ocslam.outside import seen_outside
 from app.ocslam.point_ownership import assign_points, contest_by_range
 from app.ocslam.projection import bounding_areas, camera_bound
+from app.ocslam.proximity import angle_wrap
 from app.ocslam.scan_beams import scan_beams
 from app.ocslam.se2 import Pose2
 from app.ocslam.seed import SeedConsciousness, seed_frame_report
 from app.ocslam.track_state import tracks_from_state, tracks_state
-from app.ocslam.tracks import (
-    Sighting,
-    Track,
-    angle_wrap,
-    create_track,
-    credit_track,
-    export_track,
-    grid_free_fn,
-    update_track,
-)
+from app.ocslam.tracks import Sighting, Track, create_track, credit_track, export_track, update_track
 
 FloatArray = NDArray[np.float64]
 

@@ -10,7 +10,6 @@ frame (``map``).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,6 +17,7 @@ from numpy.typing import NDArray
 from app.ocslam.classes import ClassPrior
 from app.ocslam.evidence import ObjectEvidence
 from app.ocslam.footprint import Footprint, linspace, min_area_rect, nearest_distances
+from app.ocslam.free_space import FreeFn
 from app.ocslam.ray_centre import ray_consistent, ray_normal_equations, solve2
 from app.ocslam.unseen_part import unseen_part_conflict
 
@@ -94,8 +94,6 @@ def depth_for_width(width: float, pc: ClassPrior, legs: bool = False) -> tuple[f
         return pc.width[1], pc.width[0], pc.width[2]
     return pc.width[1], pc.width[0], pc.length[2]
 
-
-FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
 
 
 def _centred(center: FloatArray, th: float, d_obs: FloatArray, pc: ClassPrior, w_app: float) -> Footprint:
@@ -234,7 +232,7 @@ def estimate_footprint(
     knows free space) vetoes an extension into space the LIDAR has seen empty: the points were then the
     object's far side (an open shelf seen from inside).
 
-    Where ``known_free`` also knows obstacles (its ``occupied`` method, :class:`~app.ocslam.tracks.GridSpace`),
+    Where ``known_free`` also knows obstacles (its ``occupied`` method, :class:`~app.ocslam.free_space.GridSpace`),
     the part of the footprint the points do not show must lie behind the object's own face: when most of it
     is seen, from every viewpoint, only through an obstacle away from the points (a wall), the object is
     turned the other way round (``depth_axis_hint``: the rectangle axis of the points taken as the depth

@@ -6,18 +6,17 @@ frames and boxes it was seen in. :func:`create_track`, :func:`update_track`, :fu
 and :func:`merge_tracks` are the only ways evidence enters a track; :func:`export_track` turns it into
 the published :class:`~app.ocslam.messages.TrackedObject`.
 
-Also here: the small geometric predicates the association and the collision rules share.
+The geometric predicates the association and the collision rules share are in :mod:`app.ocslam.proximity`, what the
+grid knows of places in :mod:`app.ocslam.free_space`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import shapely
 from numpy.typing import NDArray
 
 from app.ocslam.candidate import Candidate
@@ -26,12 +25,13 @@ from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.evidence import NO_KEYFRAME, ObjectEvidence
 from app.ocslam.footprint import Footprint, min_area_rect, nearest_distances
 from app.ocslam.footprint_estimate import estimate_footprint
-from app.ocslam.messages import OccupancyGrid, TrackedObject
+from app.ocslam.free_space import FreeFn
+from app.ocslam.messages import TrackedObject
 from app.ocslam.presence import evidence_presence, initial_presence, update_presence
+from app.ocslam.proximity import angle_wrap
 from app.ocslam.se2 import Pose2
 
 FloatArray = NDArray[np.float64]
-FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
 
 
 #: how many recent frames a track remembers the boxes and the clear misses of
@@ -65,7 +65,7 @@ class Track:
     conf_n: int = 0
     conf_best: float = 0.0
     #: objects of its class seen in one frame with it through another box, on an island apart from its own
-    #: (:func:`~app.ocslam.collisions.islands_apart`): two instances, however their accumulated points mix
+    #: (:func:`~app.ocslam.frame_collisions.islands_apart`): two instances, however their accumulated points mix
     apart: set[int] = field(default_factory=set)
 
     def frame_confidence(self, c: float, cfg: ConsciousnessConfig) -> float:
@@ -137,137 +137,6 @@ class Sighting:
         r = float(np.hypot(v[0], v[1]))
         ang = abs(float(angle_wrap(np.arctan2(v[1], v[0]) - np.arctan2(self.direction[1], self.direction[0]))))
         return ang <= self.half_angle + margin and self.r_lo <= r <= self.r_hi
-
-
-# -- shared geometric predicates ----------------------------------------------------------------------
-
-
-def angle_wrap(a):
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def overlap_fraction(a: Footprint, b: Footprint) -> float:
-    """Intersection area over the smaller footprint's area."""
-    # rectangles whose circumcircles are apart do not overlap (most pairs of a map): no polygons
-    if math.hypot(float(a.center[0] - b.center[0]), float(a.center[1] - b.center[1])) > a.circumradius + b.circumradius + 1e-9:
-        return 0.0
-    pa, pb = a.polygon, b.polygon
-    inter = shapely.area(shapely.intersection(pa, pb))
-    small = max(min(pa.area, pb.area), 1e-9)
-    return float(inter / small)
-
-
-def min_distance(a: FloatArray, b: FloatArray) -> float:
-    """Smallest distance between two ``(N, 2)`` / ``(M, 2)`` point sets (inf if either is empty)."""
-    if len(a) == 0 or len(b) == 0:
-        return math.inf
-    return float(nearest_distances(a, b).min())
-
-
-def fits_instance(pc: ClassPrior, extent_a: float, extent_b: float, typical: bool) -> bool:
-    """True if extents fit one object of the class: one of its typical shapes (25 % tolerance) with
-    ``typical``, else its largest instance (10 %)."""
-    if typical:
-        return pc.fits_typical(extent_a, extent_b, tolerance=0.25)
-    return pc.fits(extent_a, extent_b, tolerance=0.1)
-
-
-def contiguous(a: FloatArray, b: FloatArray, pc: ClassPrior, gap_m: float, typical: bool = False) -> bool:
-    """True if two point sets lie within ``gap_m`` and together fit one object of the class (one of
-    its typical shapes with ``typical``: :func:`fits_instance`)."""
-    if len(a) == 0 or len(b) == 0 or min_distance(a, b) > gap_m:
-        return False
-    _th, lo, hi = min_area_rect(np.vstack([a, b]))
-    d = hi - lo
-    return fits_instance(pc, float(d[0]), float(d[1]), typical)
-
-
-def gap_seen_free(a: FloatArray, b: FloatArray, pc: ClassPrior, known_free: FreeFn | None, step: float = 0.025) -> bool:
-    """True if the map saw free floor between two point sets ``(N, 2)`` / ``(M, 2)`` (map frame) over more than
-    one instance of the class can leave free inside itself: along the segment joining their closest points, a run
-    of known-free samples (``step`` apart, 0.1 m from either end left out) longer than the class's
-    :attr:`~app.ocslam.classes.ClassPrior.free_span` (its legs' span, an open frame's width; 0 for a solid
-    cross-section) by 0.15 m. A solid body between two of its faces blocks the LIDAR. False without a grid."""
-    if known_free is None or len(a) == 0 or len(b) == 0:
-        return False
-    if len(a) > len(b):
-        a, b = b, a
-    d = nearest_distances(a, b)
-    i = int(np.argmin(d))
-    p = a[i]
-    q = b[int(np.argmin(np.hypot(b[:, 0] - p[0], b[:, 1] - p[1])))]
-    allowed = pc.free_span + 0.15
-    gap = float(d[i])
-    if gap - 0.2 <= allowed:
-        return False
-    s = np.arange(0.1, gap - 0.1 + 1e-9, step)
-    pts = p[None, :] + (q - p)[None, :] * (s / gap)[:, None]
-    free = np.asarray(known_free(pts), dtype=bool)
-    # longest run of consecutive free samples, in metres
-    padded = np.concatenate([[0], free.astype(np.int8), [0]])
-    edges = np.flatnonzero(np.diff(padded))
-    runs = edges[1::2] - edges[0::2]
-    return bool(len(runs)) and float(runs.max()) * step > allowed
-
-
-#: occupancy below this (and known) is free space; at or above it the cell is not free
-FREE_BELOW = 20
-
-
-class GridSpace:
-    """What the occupancy grid knows of ``(N, 2)`` points (grid frame): called, True where it knows free
-    space (a :data:`~app.ocslam.footprint_estimate.FreeFn`); ``occupied``, ``None`` or a function True where
-    it knows the cell is not free (occupancy ≥ :data:`FREE_BELOW`; the sweep's compact grids keep exactly this
-    split), which footprints ask for known obstacles (principle 20; ``None`` when it is switched off)."""
-
-    def __init__(self, grid: OccupancyGrid, occupied: bool = True, legs_free: bool = False) -> None:
-        self._grid = grid
-        self.occupied: Callable[[FloatArray], NDArray[np.bool_]] | None = self._not_free if occupied else None
-        #: footprints may ask it whether the legs of an object completed from one support stand in known free
-        #: space (``consciousness.legs_seen_free``)
-        self.legs_free = legs_free
-
-    def _values(self, points: FloatArray) -> NDArray[np.int64]:
-        """``(N,)`` cell values, −1 (unknown) outside the grid."""
-        g = self._grid
-        cells = g.world_to_cell(points)
-        r, c = cells[:, 0], cells[:, 1]
-        inside = (r >= 0) & (r < g.height) & (c >= 0) & (c < g.width)
-        if inside.all():
-            return g.data[r, c].astype(np.int64)
-        out = np.full(len(points), -1, dtype=np.int64)
-        out[inside] = g.data[r[inside], c[inside]]
-        return out
-
-    def __call__(self, points: FloatArray) -> NDArray[np.bool_]:
-        v = self._values(points)
-        return (v >= 0) & (v < FREE_BELOW)
-
-    def _not_free(self, points: FloatArray) -> NDArray[np.bool_]:
-        return self._values(points) >= FREE_BELOW
-
-
-def grid_free_fn(grid: OccupancyGrid | None, occupied: bool = True, legs_free: bool = False) -> GridSpace | None:
-    """A :class:`GridSpace` of ``grid`` (``None`` without a usable grid); ``occupied``: whether footprints
-    may ask it for known obstacles (``consciousness.hidden_behind_own_face``); ``legs_free``: whether for free
-    space where legs would stand (``consciousness.legs_seen_free``)."""
-    if grid is None or grid.data.size == 0 or not np.isfinite(grid.resolution) or grid.resolution <= 0:
-        return None
-    return GridSpace(grid, occupied, legs_free)
-
-
-def along_ray_close(origin: FloatArray, a: FloatArray, b: FloatArray, thr: float, rel: float = 0.25) -> bool:
-    """True if ``b`` is within ``thr`` of ``a`` across the line of sight from ``origin``, and within
-    ``max(thr, rel·range)`` along it (the uncertainty of ground-plane ranging)."""
-    v = a - origin
-    r = float(np.hypot(v[0], v[1]))
-    if r < 1e-6:
-        return float(np.hypot(*(b - a))) < thr
-    u = v / r
-    d = b - a
-    along = abs(float(d @ u))
-    across = abs(float(d[0] * u[1] - d[1] * u[0]))
-    return across < thr and along < max(thr, rel * r)
 
 
 def co_observed(a: Track, b: Track) -> bool:

@@ -47,26 +47,21 @@ import numpy as np
 from numpy.typing import NDArray
 from shapely.geometry import Polygon
 
-from app.ocslam.area_candidate import area_candidate
 from app.ocslam.association import associate, bearing_match, sighting, wide_box
 from app.ocslam.calibration import ScoreCalibration
 from app.ocslam.camera import CameraModel
 from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
+from app.ocslam.frame_candidates import frame_candidates
 from app.ocslam.frame_collisions import (
     islands_apart,
-    one_island_class,
-    ownership_order,
-    resolve_frame_collisions,
 )
 from app.ocslam.free_space import grid_free_fn
 from app.ocslam.ghosts import decay_tracks
-from app.ocslam.islands import close_pairs, cluster_extents
 from app.ocslam.keyframe_anchors import KeyframeAnchors
 from app.ocslam.messages import CLASS_NAMES, Detection, Detections, LaserScan, OccupancyGrid, TrackedObject
 from app.ocslam.outside import seen_outside
-from app.ocslam.point_ownership import assign_points, contest_by_range
 from app.ocslam.projection import bounding_areas, camera_bound
 from app.ocslam.proximity import angle_wrap
 from app.ocslam.scan_beams import scan_beams
@@ -104,7 +99,6 @@ class Consciousness:
         self._last_pose: Pose2 | None = None
         self._last_stamp: float | None = None
         self.last_report: FrameReport | None = None
-        self._scan_clusters: tuple[NDArray[np.int64] | None, FloatArray | None] = (None, None)
         self._stamp = -math.inf
         self._known_free: Callable[[FloatArray], NDArray[np.bool_]] | None = None
         self._beams: tuple[tuple[float, float, int], FloatArray, FloatArray, FloatArray] | None = None
@@ -309,8 +303,8 @@ class Consciousness:
         n_beams = len(np.asarray(scan.ranges).reshape(-1))
         angles, cos_a, sin_a = self._beam_angles(float(scan.angle_min), float(scan.angle_increment), n_beams)
         beams = scan_beams(scan, angles, cos_a, sin_a, cam.apex_scan)
-        ranges, valid, pts_all = beams.ranges, beams.valid, beams.points
-        beam_b_scan, beam_r_scan, beam_b_apex, beam_r_apex = beams.bearing_scan, beams.range_scan, beams.bearing_apex, beams.range_apex
+        ranges, pts_all = beams.ranges, beams.points
+        beam_b_scan, beam_r_scan = beams.bearing_scan, beams.range_scan
 
         rep = FrameReport(
             stamp=stamp,
@@ -329,47 +323,7 @@ class Consciousness:
         rep.areas = areas
         if len(areas) < len(boxes):
             rep.reject("bad_box", len(boxes) - len(areas))
-        ownership = bool(cfg.point_ownership)
-        member = assign_points(pts_all, areas, exclusive=not ownership, range_tolerance=float(cfg.range_tolerance))
-        if ownership and float(cfg.range_contest_slack) < 2.0:
-            member = contest_by_range(pts_all, areas, member, float(cfg.range_contest_slack))
-
-        # the whole scan's clusters: an island clipped by its area may belong to a wall
-        gap = float(cfg.island_threshold_m)
-        scan_pairs = close_pairs(pts_all, gap) if areas else None  # one KD-tree a frame, shared by every area
-        labels, extents = (
-            cluster_extents(pts_all, gap, np.flatnonzero(valid), float(scan.angle_increment), len(ranges), pairs_within_gap=scan_pairs)
-            if areas
-            else (None, None)
-        )
-        self._scan_clusters = (labels, extents)
-        candidates: list[Candidate | None] = [None] * len(areas)
-        rep.islands = [[] for _ in areas]
-        # Point ownership: the boxes nearest the camera choose their object first (the paper's
-        # assumption 3) and the islands it takes are no longer available to the boxes behind it (a
-        # chair's legs are not the table's). Without ownership every point was given to one area by
-        # its range alone (point_ownership.assign_points).
-        owned = np.zeros(len(pts_all), dtype=bool)
-        box_px = np.array([a.box_px for a in areas], dtype=np.float64).reshape(-1, 4)
-        for k in ownership_order(areas) if ownership else range(len(areas)):
-            area = areas[k]
-            idx = np.flatnonzero(member[:, k] & ~owned)
-            area.points = pts_all[idx]
-            others = box_px[[j for j in range(len(areas)) if j != k and areas[j].label != area.label]] if ownership else None
-            cand, isl = area_candidate(
-                k, area, pts_all, idx, beam_b_apex, beam_r_apex, T_map_scan, T_map_base, grid, rep, cfg, cam, self._scan_clusters,
-                others, scan_pairs,
-            )
-            rep.islands[k] = isl
-            candidates[k] = cand
-            if cfg.islands_apart and cand is not None and labels is not None and cand.islands and one_island_class(cand.label):
-                # the scan clusters of its islands, for principle 37 (islands_apart reads them for these classes only)
-                cand.clusters = frozenset(np.unique(labels[np.concatenate([isl[g].indices for g in cand.islands])]).tolist())
-            if ownership and cand is not None:
-                for g in cand.islands:
-                    owned[isl[g].indices] = True
-        resolve_frame_collisions(candidates, cfg, rep)
-        rep.chosen = candidates
+        candidates = frame_candidates(areas, beams, float(scan.angle_increment), T_map_scan, T_map_base, grid, rep, cfg, cam)
 
         # association, evidence, presence
         touched: list[Track] = []

@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from app.ocslam.classes import ClassPrior
 from app.ocslam.evidence import ObjectEvidence
-from app.ocslam.footprint import Footprint, linspace, min_area_rect, nearest_distances
-from app.ocslam.free_space import FreeFn
+from app.ocslam.footprint import Footprint, min_area_rect, nearest_distances
+from app.ocslam.free_space import FreeFn, extension_free, far_legs_free, legs_seen_free
 from app.ocslam.ray_centre import ray_consistent, ray_normal_equations, solve2
 from app.ocslam.unseen_part import unseen_part_conflict
 
@@ -26,8 +26,6 @@ FloatArray = NDArray[np.float64]
 _STRAY_M = 0.3
 #: A voxel seen in this many frames is the object's, however often its best voxel was seen (principle 39).
 _STRAY_MIN_HITS = 3
-#: A leg's place on the grid: its point and four neighbours 5 cm away, all known free for "seen free" (m).
-_LEG_PLACE = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
 
 
 def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
@@ -118,20 +116,6 @@ def _base_before(ev: ObjectEvidence, axis: FloatArray, face: float, side: int) -
     return _median(side * (base @ axis - face))
 
 
-def _legs_seen_free(known_free: FreeFn, fp: Footprint, pts: FloatArray, leg: float) -> bool:
-    """True if the grid knows free space at two of the footprint's corners that lie farther than ``leg`` from
-    every point, where a legged object's other legs would stand (each corner inset by 8 cm, with its four
-    neighbours 5 cm away: all five free)."""
-    corners = Footprint(fp.center, fp.yaw, max(fp.size_x - 0.16, 0.0), max(fp.size_y - 0.16, 0.0)).corners
-    far = nearest_distances(corners, pts) > leg
-    n_far = int(np.count_nonzero(far))
-    if n_far < 2:
-        return False
-    samples = (corners[far][:, None, :] + _LEG_PLACE[None, :, :]).reshape(-1, 2)
-    free = np.asarray(known_free(samples)).reshape(n_far, len(_LEG_PLACE)).all(axis=1)
-    return int(np.count_nonzero(free)) >= 2
-
-
 def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], float, FloatArray, FloatArray]:
     """``(points, hits, theta, lo, hi)``: the evidence's points without strays and their rectangle
     (:func:`min_area_rect`), read-only. Kept on the evidence until its points change (a new ``points``
@@ -161,44 +145,6 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
     # the cache holds the arrays it was computed from, so their identities cannot be reused meanwhile
     ev.shape_cache = (ev.points, ev.hits, (ev.points_revision, ev.outside_ratio), pts, hits, th, lo, hi)
     return pts, hits, th, lo, hi
-
-
-def _extension_free(
-    known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
-) -> bool:
-    """True if most of the band the rectangle would grow into along axis ``i`` (by ``length``, towards
-    ``direction``) is known free."""
-    if length <= 0.05 or direction == 0:
-        return False
-    j = 1 - i
-    edge = hi[i] if direction > 0 else lo[i]
-    a = edge + direction * linspace(0.1, max(length - 0.05, 0.1), 6)
-    b = linspace(float(lo[j]), float(hi[j]), 5) if hi[j] - lo[j] > 0.05 else np.array([0.5 * (lo[j] + hi[j])])
-    rect = np.empty((len(a) * len(b), 2))
-    rect[:, i] = np.tile(a, len(b))  # the grid of (a, b), b-major (meshgrid's order)
-    rect[:, j] = np.repeat(b, len(a))
-    pts = rect @ axes  # rectangle coordinates → object frame
-    free = known_free(pts)
-    return int(np.count_nonzero(free)) / len(free) > 0.6
-
-
-def _far_legs_free(
-    known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
-) -> bool:
-    """For an object seen as legs: True if the grid knows free space where its far legs would stand, at both ends
-    of the far edge of the rectangle grown along axis ``i`` (by ``length``, towards ``direction``), each inset by
-    8 cm with its four neighbours 5 cm away (all five free). The floor between and under the legs is free anyway."""
-    if length <= 0.05 or direction == 0:
-        return False
-    j = 1 - i
-    edge = hi[i] if direction > 0 else lo[i]
-    far = edge + direction * max(length - 0.08, 0.0)
-    ends = (float(lo[j]) + 0.08, float(hi[j]) - 0.08) if hi[j] - lo[j] > 0.16 else (0.5 * float(lo[j] + hi[j]),) * 2
-    rect = np.empty((2, 2))
-    rect[:, i] = far
-    rect[:, j] = ends
-    pts = ((rect[:, None, :] + _LEG_PLACE[None, :, :]).reshape(-1, 2)) @ axes  # rectangle coordinates → object frame
-    return bool(np.asarray(known_free(pts)).reshape(2, len(_LEG_PLACE)).all())
 
 
 def estimate_footprint(
@@ -367,9 +313,9 @@ def estimate_footprint(
             s_lo[i], s_hi[i] = mid[i] - slack, mid[i] + slack
             s_prior[i] = mid[i]
         elif known_free is not None and (
-            _far_legs_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
+            far_legs_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
             if legs and ev.legs_extend
-            else _extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
+            else extension_free(known_free, axes, i, lo, hi, -side[i], dep_nom - d_obs[i])
         ):
             # the space it would extend into is known free: keep what was seen
             size[i] = max(d_obs[i], 0.05)
@@ -411,7 +357,7 @@ def estimate_footprint(
     if (
         known_free is not None and pc.pedestal and getattr(known_free, "legs_free", False)
         and max(d_obs) <= pc.leg_size_max * 1.5 and min(fp.size_x, fp.size_y) >= pc.width[0]
-        and _legs_seen_free(known_free, fp, pts, pc.leg_size_max)
+        and legs_seen_free(known_free, fp, pts, pc.leg_size_max)
     ):
         # one support, and where the legs of the object completed from it would stand the LIDAR saw free space:
         # that support is its centre (a pedestal seen off its boxes' centre lines), not one of its legs

@@ -1,6 +1,7 @@
 """What the occupancy grid knows of places (improved mode): free space, known obstacles, and free floor seen between
 two point sets. A :class:`GridSpace` is the ``known_free`` the footprints, the association and the collision rules
-ask (``(N, 2)`` points in the grid's frame, ``map``)."""
+ask (``(N, 2)`` points in the grid's frame, ``map``); the footprints also ask it whether the floor they would extend
+over, or where an object's other legs would stand, was seen free."""
 
 from __future__ import annotations
 
@@ -10,12 +11,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from app.ocslam.classes import ClassPrior
-from app.ocslam.footprint import nearest_distances
+from app.ocslam.footprint import Footprint, linspace, nearest_distances
 from app.ocslam.messages import OccupancyGrid
 
 FloatArray = NDArray[np.float64]
 #: ``(N, 2)`` points → ``(N,)`` True where the occupancy grid knows free space
 FreeFn = Callable[[FloatArray], NDArray[np.bool_]]
+#: A leg's place on the grid: its point and four neighbours 5 cm away, all known free for "seen free" (m).
+LEG_PLACE = np.array([[0.0, 0.0], [0.05, 0.0], [-0.05, 0.0], [0.0, 0.05], [0.0, -0.05]])
 
 
 #: occupancy below this (and known) is free space; at or above it the cell is not free
@@ -90,3 +93,55 @@ def gap_seen_free(a: FloatArray, b: FloatArray, pc: ClassPrior, known_free: Free
     edges = np.flatnonzero(np.diff(padded))
     runs = edges[1::2] - edges[0::2]
     return bool(len(runs)) and float(runs.max()) * step > allowed
+
+
+def legs_seen_free(known_free: FreeFn, fp: Footprint, pts: FloatArray, leg: float) -> bool:
+    """True if the grid knows free space at two of the footprint's corners that lie farther than ``leg`` from
+    every point, where a legged object's other legs would stand (each corner inset by 8 cm, with its four
+    neighbours 5 cm away: all five free)."""
+    corners = Footprint(fp.center, fp.yaw, max(fp.size_x - 0.16, 0.0), max(fp.size_y - 0.16, 0.0)).corners
+    far = nearest_distances(corners, pts) > leg
+    n_far = int(np.count_nonzero(far))
+    if n_far < 2:
+        return False
+    samples = (corners[far][:, None, :] + LEG_PLACE[None, :, :]).reshape(-1, 2)
+    free = np.asarray(known_free(samples)).reshape(n_far, len(LEG_PLACE)).all(axis=1)
+    return int(np.count_nonzero(free)) >= 2
+
+
+def extension_free(
+    known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
+) -> bool:
+    """True if most of the band the rectangle would grow into along axis ``i`` (by ``length``, towards
+    ``direction``) is known free."""
+    if length <= 0.05 or direction == 0:
+        return False
+    j = 1 - i
+    edge = hi[i] if direction > 0 else lo[i]
+    a = edge + direction * linspace(0.1, max(length - 0.05, 0.1), 6)
+    b = linspace(float(lo[j]), float(hi[j]), 5) if hi[j] - lo[j] > 0.05 else np.array([0.5 * (lo[j] + hi[j])])
+    rect = np.empty((len(a) * len(b), 2))
+    rect[:, i] = np.tile(a, len(b))  # the grid of (a, b), b-major (meshgrid's order)
+    rect[:, j] = np.repeat(b, len(a))
+    pts = rect @ axes  # rectangle coordinates → object frame
+    free = known_free(pts)
+    return int(np.count_nonzero(free)) / len(free) > 0.6
+
+
+def far_legs_free(
+    known_free: FreeFn, axes: FloatArray, i: int, lo: FloatArray, hi: FloatArray, direction: int, length: float
+) -> bool:
+    """For an object seen as legs: True if the grid knows free space where its far legs would stand, at both ends
+    of the far edge of the rectangle grown along axis ``i`` (by ``length``, towards ``direction``), each inset by
+    8 cm with its four neighbours 5 cm away (all five free). The floor between and under the legs is free anyway."""
+    if length <= 0.05 or direction == 0:
+        return False
+    j = 1 - i
+    edge = hi[i] if direction > 0 else lo[i]
+    far = edge + direction * max(length - 0.08, 0.0)
+    ends = (float(lo[j]) + 0.08, float(hi[j]) - 0.08) if hi[j] - lo[j] > 0.16 else (0.5 * float(lo[j] + hi[j]),) * 2
+    rect = np.empty((2, 2))
+    rect[:, i] = far
+    rect[:, j] = ends
+    pts = ((rect[:, None, :] + LEG_PLACE[None, :, :]).reshape(-1, 2)) @ axes  # rectangle coordinates → object frame
+    return bool(np.asarray(known_free(pts)).reshape(2, len(LEG_PLACE)).all())

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import shapely
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from app.ocslam.classes import ClassPrior
 from app.ocslam.footprint import Footprint, min_area_rect, nearest_distances
@@ -15,8 +15,9 @@ from app.ocslam.footprint import Footprint, min_area_rect, nearest_distances
 FloatArray = NDArray[np.float64]
 
 
-def angle_wrap(a):
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+def angle_wrap(a: ArrayLike) -> NDArray[np.float64]:
+    """Angles (rad, any shape) wrapped into ``[-π, π)``."""
+    return np.asarray((np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi)
 
 
 def overlap_fraction(a: Footprint, b: Footprint) -> float:

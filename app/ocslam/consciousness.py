@@ -54,9 +54,7 @@ from app.ocslam.candidate import SOURCES, Candidate, FrameReport
 from app.ocslam.collisions import resolve_track_collisions
 from app.ocslam.config import ConsciousnessConfig
 from app.ocslam.frame_candidates import frame_candidates
-from app.ocslam.frame_collisions import (
-    islands_apart,
-)
+from app.ocslam.frame_collisions import islands_apart
 from app.ocslam.free_space import grid_free_fn
 from app.ocslam.ghosts import decay_tracks
 from app.ocslam.keyframe_anchors import KeyframeAnchors

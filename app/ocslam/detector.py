@@ -228,10 +228,9 @@ def _card_entries(card: dict) -> list[dict]:
 
 
 def _read_card(path: Path) -> dict | None:
-    """A model card's YAML as a dict (a fresh copy), or None if unreadable or not a mapping; the parse is
-    cached while the file's size and modification time stay the same (a sweep replays hundreds of traces)."""
-    import copy
-
+    """A model card's YAML as a dict (shared: read it, never change it), or None if unreadable or not a mapping;
+    the parse is cached while the file's size and modification time stay the same (a sweep replays hundreds of
+    traces)."""
     import yaml
 
     try:
@@ -242,7 +241,7 @@ def _read_card(path: Path) -> dict | None:
             _CARDS[key] = card if isinstance(card, dict) else None
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
         return None
-    return copy.deepcopy(_CARDS[key])
+    return _CARDS[key]
 
 
 def find_model_card(model: Path) -> tuple[Path, dict] | None:
@@ -252,6 +251,8 @@ def find_model_card(model: Path) -> tuple[Path, dict] | None:
     a ``model`` or ``variants[]`` entry whose ``file`` is the model's file name. Unreadable YAML files
     are skipped (they describe nothing).
     """
+    import copy
+
     model = Path(model)
     folder = model.parent
     first = model.with_suffix(".yaml")
@@ -262,7 +263,7 @@ def find_model_card(model: Path) -> tuple[Path, dict] | None:
             continue
         for entry in _card_entries(card):
             if str(entry.get("file", "")) == model.name:
-                return card_path, entry
+                return card_path, copy.deepcopy(entry)  # the caller's own: the parsed card is shared
     return None
 
 

@@ -342,9 +342,16 @@ def resolve_track_collisions(
                 )
                 if small_fp.area < 0.5 * big_fp.area and not small.partial_only:
                     big_pts = shared[1] if small is a else shared[0]
-                    # the shared points go to their owner: a legged object's leg at its corner is its
-                    # own (flowers seen behind a desk's corner leg), else the nested object's (a chair's legs)
-                    loser, lost_pts = (small, big_pts) if corner_leg(small, small_pts, big, big_pts, cfg) else (big, small_pts)
+                    # the shared points go to their owner: a legged object's leg at its corner is its own (flowers
+                    # seen behind a desk's corner leg), and a confirmed object's against a nested one not yet
+                    # confirmed (principle 5: evidence over frames; a first glimpse of a chair behind a round table
+                    # does not take its pedestal); else the nested object's (a chair's legs under a table's edge)
+                    if corner_leg(small, small_pts, big, big_pts, cfg) or (
+                        cfg.nested_unconfirmed and small.presence < float(cfg.presence_threshold) <= big.presence
+                    ):
+                        loser, lost_pts = small, big_pts
+                    else:
+                        loser, lost_pts = big, small_pts
                     if strip_points(loser, lost_pts, cfg, known_free):
                         continue
                     drop = loser

@@ -375,6 +375,13 @@ class ConsciousnessConfig:
         "behind a desk's corner leg; elsewhere the nested object keeps them: a chair's legs under a table's edge)",
         live=True,
     )
+    nested_unconfirmed: bool = param(
+        True,
+        help="improved, collisions: an object not yet confirmed (presence below presence_threshold) nested in a confirmed "
+        "one of another class loses the points they share instead of taking them (a box's first glimpse of a chair "
+        "behind a round table does not take the table's pedestal; once confirmed, the nested object takes them)",
+        live=True,
+    )
     presence_confidence: str = param(
         "best",
         choices=("latest", "mean", "best"),

@@ -138,6 +138,35 @@ def test_a_pedestal_joins_no_points_beside_it(fraction: float):
         assert kept.support is True and np.allclose(kept.points, ped)
 
 
+@pytest.mark.parametrize("whole_boxes", [True, False])
+def test_a_box_cut_by_the_border_tells_nothing_of_a_pedestal(whole_boxes: bool):
+    """A round table seen on its pedestal through 5 whole boxes and through 4 boxes cut by the image border (no centre
+    line: "no telling"), then a cut box whose wedge holds the pedestal and a leg of a chair beside it (a group of legs,
+    ``support`` None). With ``support_whole_boxes`` a pedestal's share is of the views that told (5 of 5) and the
+    cut view's group joins it only at its support; without it the share is of every view (5 of 9, under
+    ``pedestal_fraction`` 0.8) and the chair's leg joins the table (the kind of case: random dev openplan 98235, a
+    table among chairs seen close through boxes cut by the border)."""
+    from app.ocslam.candidate import Candidate
+    from app.ocslam.config import ConsciousnessConfig
+    from app.ocslam.footprint import Footprint
+    from app.ocslam.tracks import pedestal, update_track
+
+    ped, chair_leg = _square(3.4, 0.0), _square(3.9, 0.45)
+    table = _track(0, ped, 5, {})
+    ev = table.evidence
+    ev.support_obs, ev.corner_obs, ev.observations = 5, 0, 9
+    assert pedestal(ev, ped, prior("table"), 0.8, told_only=True) and not pedestal(ev, ped, prior("table"), 0.8)
+    cfg = ConsciousnessConfig()
+    cfg.support_whole_boxes = whole_boxes
+    pts = np.vstack([ped, chair_leg])
+    cut = Candidate(0, "table", 0.9, "lidar_legs", pts, Footprint(pts.mean(axis=0), 0.0, 1.0, 1.0), 3.0,
+                    ray_origin=np.array([0.0, 0.0]), ray_dir=np.array([1.0, 0.0]), ray_weight=0.0, support=None, legs=True)
+    update_track(table, cut, 4.0, -1, True, cfg, None)
+    far = np.hypot(ev.points[:, 0] - 3.9, ev.points[:, 1] - 0.45) < 0.05
+    assert far.any() != whole_boxes  # the chair's leg joined only without the rule
+    assert (ev.support_obs, ev.corner_obs) == ((6, 0) if whole_boxes else (5, 0))
+
+
 def test_only_classes_with_pedestal_instances_stand_on_a_pedestal():
     """``ClassPrior.pedestal``: a table may stand on one central column; a chair seen as one central leg in
     every view is a chair whose other legs were hidden, not a pedestal chair (``tracks.pedestal``)."""

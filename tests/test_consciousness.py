@@ -254,6 +254,22 @@ def test_sofa_seen_only_at_the_image_border_makes_one_object():
     assert 0.8 <= o.pose.x <= 3.0 and 0.75 <= o.pose.y <= 1.75  # inside the true footprint
 
 
+@pytest.mark.parametrize("whole_boxes", [True, False])
+def test_a_table_seen_only_cut_by_the_border_never_tells_its_support(whole_boxes: bool):
+    """Driving past a four-legged table beside the path, seen only through boxes cut by the image's left border: a
+    cut box has no centre line, so with ``support_whole_boxes`` none of its views says one central support or
+    several legs (the track's ``support_obs`` and ``corner_obs`` stay 0); without it each group of legs counted
+    against a pedestal."""
+    legs, top = table(1.9, 1.05, 1.2, 0.7, yaw=0.0)
+    c = make(support_whole_boxes=whole_boxes)
+    reps = drive(c, legs, [("table", legs + [top])], line(30, x0=-0.8, step=0.12))
+    assert any(r.areas for r in reps) and all(r.areas[0].truncated["left"] for r in reps if r.areas)
+    tracks = [t for t in c._tracks if t.label == "table" and t.evidence.observations > 0]
+    assert tracks
+    told = sum(t.evidence.support_obs + t.evidence.corner_obs for t in tracks)
+    assert (told == 0) == whole_boxes
+
+
 def test_a_wall_seen_at_a_grazing_angle_is_not_a_leg():
     """A table near a wall that runs almost along the line of sight: the wall's sparse points fall in
     the table's box between the legs; they belong to a long scan cluster, so they never join the legs."""

@@ -28,7 +28,8 @@ def strong_points(t: Track) -> FloatArray:
 
 
 def one_instance(
-    a: Track, b: Track, fragment_fits_largest: bool = False, pedestal_fraction: float = 0.0, box_widths: bool = False
+    a: Track, b: Track, fragment_fits_largest: bool = False, pedestal_fraction: float = 0.0, box_widths: bool = False,
+    told_only: bool = False,
 ) -> bool:
     """True if two same-class objects' well-seen points together fit one instance of the class (one
     of its typical shapes; for legs seen as legs, the legs of one instance; for an object on a pedestal
@@ -49,7 +50,7 @@ def one_instance(
     if box_widths and wider_than_boxes(a, b, both):
         return False
     if pc.legged and float(max(d)) > pc.leg_size_max * 1.5 and any(
-        pedestal(t.evidence, p, pc, pedestal_fraction) for t, p in ((a, pa), (b, pb))
+        pedestal(t.evidence, p, pc, pedestal_fraction, told_only) for t, p in ((a, pa), (b, pb))
     ):
         return False  # a pedestal's points are its support alone: the rest is another object's
     legs = pc.legged and all(t.evidence.leg_obs * 2 > t.evidence.observations for t in (a, b))
@@ -279,12 +280,13 @@ def resolve_track_collisions(
                             break
                         continue
                     apart = cfg.islands_apart and (b.id in a.apart or a.id in b.apart)
-                    if apart or not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check):
+                    if apart or not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check,
+                                                     cfg.support_whole_boxes):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own; a pedestal's support
                         # is its own whatever its footprint (principle 16: its cross-section is that support)
                         loser, other_pts = (a, shared[1]) if fa.area >= fb.area else (b, shared[0])
-                        ped_a, ped_b = (pedestal(t.evidence, q, t.prior, float(cfg.pedestal_fraction))
+                        ped_a, ped_b = (pedestal(t.evidence, q, t.prior, float(cfg.pedestal_fraction), cfg.support_whole_boxes)
                                         for t, q in ((a, shared[0]), (b, shared[1])))
                         if ped_a != ped_b:
                             loser, other_pts = (b, shared[0]) if ped_a else (a, shared[1])
@@ -298,7 +300,9 @@ def resolve_track_collisions(
                         break
                     continue
                 same = d < thr or overlap_fraction(fa, fb) >= ov
-                if same and cfg.point_ownership and not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction)):
+                if same and cfg.point_ownership and not one_instance(
+                    a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), told_only=cfg.support_whole_boxes
+                ):
                     # overlapping, but together larger than any instance: two objects, unless each stands
                     # on the other's centre (two solid objects cannot interpenetrate: one of them holds
                     # foreign points)

@@ -375,6 +375,14 @@ class ConsciousnessConfig:
         "behind a desk's corner leg; elsewhere the nested object keeps them: a chair's legs under a table's edge)",
         live=True,
     )
+    support_whole_boxes: bool = param(
+        True,
+        help="improved: only a box not cut by the image border tells whether a legged object stands on one central "
+        "support (a cut box's centre line is unknown and its wedge holds what stands beside it): a cut view counts "
+        "neither for nor against a pedestal, a pedestal's share is of the views that told, and a group of legs seen "
+        "through a cut box joins a pedestal only at its support",
+        live=True,
+    )
     nested_unconfirmed: bool = param(
         True,
         help="improved, collisions: an object not yet confirmed (presence below presence_threshold) nested in a confirmed "

@@ -145,14 +145,15 @@ def co_observed(a: Track, b: Track) -> bool:
     return any(a.boxes[k] != b.boxes[k] for k in common)
 
 
-def pedestal(ev: ObjectEvidence, own: FloatArray, pc: ClassPrior, fraction: float) -> bool:
+def pedestal(ev: ObjectEvidence, own: FloatArray, pc: ClassPrior, fraction: float, told_only: bool = False) -> bool:
     """True if a legged object was seen as one small island on its box's centre line in at least ``fraction``
     of its views (and more often than as legs off it), and its points ``own`` ``(N, 2)`` are still that one
     support: a pedestal (a round table's). A four-legged table shows one central leg only from some
-    directions; a pedestal stays central from all of them."""
+    directions; a pedestal stays central from all of them. ``told_only``: the share is of the views that told
+    (``support_obs + corner_obs``), not of every view with points (``consciousness.support_whole_boxes``)."""
     if fraction <= 0.0 or not (pc.legged and pc.pedestal) or ev.support_obs <= ev.corner_obs or len(own) == 0:
         return False
-    if ev.support_obs < fraction * ev.observations:
+    if ev.support_obs < fraction * ((ev.support_obs + ev.corner_obs) if told_only else ev.observations):
         return False
     _th, lo, hi = min_area_rect(own)
     return float(np.max(hi - lo)) <= pc.leg_size_max * 1.5
@@ -301,7 +302,8 @@ def update_track(
             # the union would not fit one object of this class: keep the track's shape, use the ray only
             cand = dataclasses.replace(cand, points=np.zeros((0, 2)), ground_center=None)
             consistent = False
-        elif cfg.point_ownership and cand.legs and cand.support is False and pedestal(t.evidence, own, pc, float(cfg.pedestal_fraction)):
+        elif (cfg.point_ownership and cand.legs and (cand.support is False or (cfg.support_whole_boxes and cand.support is None))
+              and pedestal(t.evidence, own, pc, float(cfg.pedestal_fraction), bool(cfg.support_whole_boxes))):
             # a pedestal stays one: of a group of legs, only those at its support are its own (the legs of
             # stools round a round table); a group with none there says it is no pedestal after all
             at = nearest_distances(cand.points, own) <= pc.leg_size_max

@@ -207,6 +207,55 @@ def test_a_leg_seen_in_three_frames_is_no_stray(far_views: int):
         assert np.hypot(*(fp.center - np.array([0.85, 0.45]))) > 0.3
 
 
+@pytest.mark.parametrize("by_views", [True, False])
+def test_a_near_legs_many_returns_do_not_make_the_far_legs_strays(by_views: bool):
+    """Principle 45 (``consciousness.stray_by_views``): a 1.8 × 1.0 m table whose near leg, 1 m from the LIDAR, gave
+    three returns a frame in each of 12 frames (36 points in one voxel), and whose far legs gave one return a frame
+    in 2 frames. Counted by views, the near leg's voxel was seen 12 times and the far legs' twice, over a tenth of
+    it: the footprint spans the four legs. Counted by points (36 against 2), the far legs were strays and the
+    footprint stood on the near leg (the dev world random corridor 98257, its table 0.84 m off)."""
+    near = np.array([[0.01, 0.01]])
+    far = np.array([[1.71, 0.01], [0.01, 0.91], [1.71, 0.91]])
+    ev = ObjectEvidence()
+    ev.stray_by_views = by_views
+    for _ in range(12):
+        ev.add_points(np.repeat(near, 3, axis=0))
+    for _ in range(2):
+        ev.add_points(far)
+    assert ev.hits.max() == 36 and ev.frames.max() == 12 and sorted(ev.frames.tolist()) == [2, 2, 2, 12]
+    fp = estimate_footprint(ev, CLASS_PRIORS["table"])
+    assert fp is not None
+    off = float(np.hypot(*(fp.center - np.array([0.86, 0.46]))))
+    if by_views:
+        assert off < 0.1 and min(fp.size_x, fp.size_y) > 0.8 and max(fp.size_x, fp.size_y) > 1.6
+    else:
+        assert off > 0.8  # centred on the near leg
+
+
+def test_a_voxels_views_count_once_a_view_and_survive_merges_and_states():
+    """``ObjectEvidence.frames``: each call of ``add_points`` counts once in every voxel it reaches, however many of
+    its points fall there; an absorbed object's voxels bring their views, a state keeps them, and a state saved before
+    they were kept reads its hits as views."""
+    ev = ObjectEvidence()
+    ev.add_points(np.array([[0.01, 0.01], [0.011, 0.012], [0.5, 0.5]]))
+    ev.add_points(np.array([[0.012, 0.011]]))
+    order = np.argsort(ev.points[:, 0])
+    assert ev.hits[order].tolist() == [3, 1] and ev.frames[order].tolist() == [2, 1]
+    other = ObjectEvidence()
+    for _ in range(3):
+        other.add_points(np.array([[0.5, 0.5]]))
+    ev.absorb(other)
+    order = np.argsort(ev.points[:, 0])
+    assert ev.hits[order].tolist() == [3, 4] and ev.frames[order].tolist() == [2, 4]
+    back = ObjectEvidence.from_state_dict(ev.state_dict())
+    np.testing.assert_array_equal(back.frames, ev.frames)
+    old = ev.state_dict()
+    del old["frames"]
+    np.testing.assert_array_equal(ObjectEvidence.from_state_dict(old).frames, ev.hits)
+    ev.keep_points(ev.points[:, 0] > 0.2)
+    assert ev.frames.tolist() == [4]
+
+
 def _near_legs_evidence(legs_extend: bool) -> ObjectEvidence:
     """A 1.8 × 1.0 m table's two near legs (the short side, 0.94 m apart at x = 2) seen from the west (the robot at
     x ≈ 0) through whole boxes about 1 m wide, as legs in every view."""

@@ -375,6 +375,13 @@ class ConsciousnessConfig:
         "behind a desk's corner leg; elsewhere the nested object keeps them: a chair's legs under a table's edge)",
         live=True,
     )
+    stray_by_views: bool = param(
+        True,
+        help="improved: the footprint's stray filter counts the views that added to a voxel, not the points it merged (a "
+        "near leg gives several points a frame, a far leg one: counted by points, a near leg seen often made the far "
+        "legs' voxels strays)",
+        live=True,
+    )
     support_whole_boxes: bool = param(
         True,
         help="improved: only a box not cut by the image border tells whether a legged object stands on one central "

@@ -365,12 +365,14 @@ class Consciousness:
         # negative evidence: points of each object seen now outside the box that saw it (a neighbour's)
         ratio, ray_sigma, width_cap = float(cfg.outside_ratio), float(cfg.ray_centre_sigma_m), float(cfg.box_width_cap)
         behind, legs_extend, far_face = bool(cfg.ray_centre_behind_surface), bool(cfg.legs_extend), bool(cfg.far_face)
+        by_views = bool(cfg.stray_by_views)
         for cand, t in seen_through:
             ev = t.evidence
             changed = (ev.outside_ratio != ratio or ev.ray_centre_sigma != ray_sigma or ev.box_width_cap != width_cap
-                       or ev.ray_centre_behind_surface != behind or ev.legs_extend != legs_extend or ev.far_face != far_face)
+                       or ev.ray_centre_behind_surface != behind or ev.legs_extend != legs_extend or ev.far_face != far_face
+                       or ev.stray_by_views != by_views)
             ev.outside_ratio, ev.ray_centre_sigma, ev.box_width_cap = ratio, ray_sigma, width_cap
-            ev.ray_centre_behind_surface, ev.legs_extend, ev.far_face = behind, legs_extend, far_face
+            ev.ray_centre_behind_surface, ev.legs_extend, ev.far_face, ev.stray_by_views = behind, legs_extend, far_face, by_views
             if ratio > 0.0 and ev.has_points:
                 changed |= ev.mark_outside(seen_outside(ev.points, ev.hits, T_map_scan, areas[cand.area_index], cam, ranges,
                                                         float(scan.angle_min), float(scan.angle_increment), max_r))

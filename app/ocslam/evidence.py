@@ -2,7 +2,8 @@
 
 Every observation of an object adds:
 
-- its island points (voxel-downsampled; ``hits`` counts how often a voxel was seen),
+- its island points (voxel-downsampled; ``hits`` counts the points a voxel merged, ``frames`` the views that
+  added to it),
 - the *bisector ray* of its box (apex and direction on the floor plane): the object's centre lies near
   it (the paper's assumption 2); rays of boxes cut by the image border only count as viewpoints,
 - for objects the LIDAR cannot see, a ground-plane centre (rolling average, the paper's 90 % weight).
@@ -84,6 +85,9 @@ class ObjectEvidence:
         self.max_rays = max_rays
         self.points = np.zeros((0, 2))
         self.hits = np.zeros(0, dtype=np.int64)
+        #: per voxel: the views (calls of :meth:`add_points`) that added a point to it; a view counts once however many
+        #: of its points fell in the voxel (a near leg gives several a frame, a far one one or none)
+        self.frames = np.zeros(0, dtype=np.int64)
         self.point_kf = np.zeros(0, dtype=np.int64)
         #: per voxel: frames in which the LIDAR saw it inside the image but outside the object's own box
         #: (:mod:`app.ocslam.outside`); ``outside_ratio`` (``consciousness.outside_ratio``, 0: off) decides
@@ -104,6 +108,8 @@ class ObjectEvidence:
         #: ``consciousness.legs_extend``: an object seen as legs is completed over free floor unless its far legs'
         #: places are seen free (the floor under a table is free)
         self.legs_extend = False
+        #: ``consciousness.stray_by_views``: the stray filter counts a voxel's views (``frames``), not its points (``hits``)
+        self.stray_by_views = True
         self.ray_origin = np.zeros((0, 2))
         self.ray_dir = np.zeros((0, 2))
         self.ray_weight = np.zeros(0)
@@ -131,16 +137,22 @@ class ObjectEvidence:
     def has_points(self) -> bool:
         return len(self.points) > 0
 
-    def add_points(self, points: FloatArray, kf: int = NO_KEYFRAME, outside: NDArray[np.int64] | None = None) -> None:
+    def add_points(
+        self, points: FloatArray, kf: int = NO_KEYFRAME, outside: NDArray[np.int64] | None = None,
+        frames: NDArray[np.int64] | None = None,
+    ) -> None:
         """Add ``(N, 2)`` points (object frame), merging them into voxels of ``voxel_m``; ``outside``
-        ``(N,)`` their counts of views outside the object's box (:meth:`absorb`; default none)."""
+        ``(N,)`` their counts of views outside the object's box (:meth:`absorb`; default none); ``frames`` ``(N,)``
+        the views each point carries (:meth:`absorb`; default: one view, counted once in each voxel it reaches)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         fin = np.isfinite(p)
         ok = fin[:, 0] & fin[:, 1]
         out_new = np.zeros(len(p), dtype=np.int64) if outside is None else np.asarray(outside, dtype=np.int64).reshape(-1)
+        fr_new = None if frames is None else np.asarray(frames, dtype=np.int64).reshape(-1)
         if not ok.all():
             p = p[ok]
             out_new = out_new[ok]
+            fr_new = None if fr_new is None else fr_new[ok]
         if len(p) == 0:
             return
         # existing voxel means carry their hit counts as weights
@@ -155,6 +167,14 @@ class ObjectEvidence:
         sy = np.bincount(inv, weights=pos[:, 1] * w, minlength=n)
         kf_out = np.full(n, NO_KEYFRAME, dtype=np.int64)
         np.maximum.at(kf_out, inv, kfs)
+        m_old = len(self.hits)
+        fr_out = np.bincount(inv[:m_old], weights=self.frames.astype(np.float64), minlength=n).astype(np.float64)  # (int when empty)
+        if fr_new is None:
+            touched = np.zeros(n, dtype=bool)
+            touched[inv[m_old:]] = True
+            fr_out += touched
+        else:
+            fr_out += np.bincount(inv[m_old:], weights=fr_new.astype(np.float64), minlength=n)
         if self.outside.any() or out_new.any():
             out_all = np.concatenate([self.outside, out_new]).astype(np.float64)
             self.outside = np.rint(np.bincount(inv, weights=out_all, minlength=n)).astype(np.int64)
@@ -164,17 +184,18 @@ class ObjectEvidence:
         np.divide(sx, wsum, out=self.points[:, 0])
         np.divide(sy, wsum, out=self.points[:, 1])
         self.hits = np.rint(wsum).astype(np.int64)
+        self.frames = np.rint(fr_out).astype(np.int64)
         self.point_kf = kf_out
         if len(self.points) > self.max_points:
             keep = np.argsort(-self.hits, kind="stable")[: self.max_points]
             keep.sort()
             self.points, self.hits, self.point_kf = self.points[keep], self.hits[keep], self.point_kf[keep]
-            self.outside = self.outside[keep]
+            self.outside, self.frames = self.outside[keep], self.frames[keep]
 
     def keep_points(self, keep: NDArray[np.bool_]) -> None:
         """Keep only the voxels where ``keep`` ``(N,)`` is True (with their hits, keyframes and counts)."""
         self.points, self.hits, self.point_kf = self.points[keep], self.hits[keep], self.point_kf[keep]
-        self.outside = self.outside[keep]
+        self.outside, self.frames = self.outside[keep], self.frames[keep]
 
     def mark_outside(self, seen: NDArray[np.bool_]) -> bool:
         """One more view outside the object's box for each voxel where ``seen`` ``(N,)`` is True; True if
@@ -262,11 +283,14 @@ class ObjectEvidence:
         if other.has_points:
             for k in np.unique(other.point_kf):
                 m = other.point_kf == k
-                # repeat points by hits to keep their weight; the first copy carries the outside count
+                # repeat points by hits to keep their weight; the first copy carries the outside and view counts
                 h = other.hits[m]
+                first = np.concatenate([[0], np.cumsum(h)[:-1]])
                 out = np.zeros(int(h.sum()), dtype=np.int64)
-                out[np.concatenate([[0], np.cumsum(h)[:-1]])] = other.outside[m]
-                self.add_points(np.repeat(other.points[m], h, axis=0), int(k), out)
+                out[first] = other.outside[m]
+                fr = np.zeros(int(h.sum()), dtype=np.int64)
+                fr[first] = other.frames[m]
+                self.add_points(np.repeat(other.points[m], h, axis=0), int(k), out, fr)
         for o, d, w, k, a, op, br in zip(other.ray_origin, other.ray_dir, other.ray_weight, other.ray_kf, other.ray_app,
                                          other.ray_open, other.ray_base):
             self.add_ray(o, d, float(w), int(k), apparent_width=float(a), open_side=int(op), base_range=float(br))
@@ -360,6 +384,7 @@ class ObjectEvidence:
             "voxel_m": self.voxel_m,
             "points": self.points.tolist(),
             "hits": self.hits.tolist(),
+            "frames": self.frames.tolist(),
             "point_kf": self.point_kf.tolist(),
             "outside": self.outside.tolist(),
             "ray_origin": self.ray_origin.tolist(),
@@ -382,6 +407,7 @@ class ObjectEvidence:
         e = ObjectEvidence(voxel_m=float(d.get("voxel_m", 0.03)))
         e.points = np.asarray(d.get("points", []), dtype=np.float64).reshape(-1, 2)
         e.hits = np.asarray(d.get("hits", []), dtype=np.int64).reshape(-1)
+        e.frames = np.asarray(d.get("frames", e.hits), dtype=np.int64).reshape(-1)  # states saved before it: its hits
         e.point_kf = np.asarray(d.get("point_kf", []), dtype=np.int64).reshape(-1)
         e.outside = np.asarray(d.get("outside", [0] * len(e.hits)), dtype=np.int64).reshape(-1)
         e.ray_origin = np.asarray(d.get("ray_origin", []), dtype=np.float64).reshape(-1, 2)
@@ -398,7 +424,7 @@ class ObjectEvidence:
         e.corner_obs = int(d.get("corner_obs", 0))
         e.observations = int(d.get("observations", 0))
         e.leg_obs = int(d.get("leg_obs", 0))
-        if not (len(e.points) == len(e.hits) == len(e.point_kf) == len(e.outside)) or not (
+        if not (len(e.points) == len(e.hits) == len(e.frames) == len(e.point_kf) == len(e.outside)) or not (
             len(e.ray_origin) == len(e.ray_dir) == len(e.ray_weight) == len(e.ray_kf) == len(e.ray_app) == len(e.ray_open)
             == len(e.ray_base)
         ):

@@ -25,7 +25,7 @@ FloatArray = NDArray[np.float64]
 #: A voxel seen rarely and farther than this from every well-seen voxel is a stray (m).
 _STRAY_M = 0.3
 #: A voxel seen in this many frames is the object's, however often its best voxel was seen (principle 39).
-_STRAY_MIN_HITS = 3
+_STRAY_MIN_VIEWS = 3
 
 
 def _box_qp(H: FloatArray, g: FloatArray, lo: FloatArray, hi: FloatArray) -> FloatArray:
@@ -122,17 +122,20 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
     or ``hits`` array, or ``points_revision``): a bisector ray alone, or a correction of other
     keyframes, leaves them as they were."""
     c = ev.shape_cache
-    if c is not None and c[0] is ev.points and c[1] is ev.hits and c[2] == (ev.points_revision, ev.outside_ratio):
+    key = (ev.points_revision, ev.outside_ratio, ev.stray_by_views)
+    if c is not None and c[0] is ev.points and c[1] is ev.hits and c[2] == key:
         return c[3], c[4], c[5], c[6], c[7]
     points, all_hits = ev.points, ev.hits
+    seen = ev.frames if ev.stray_by_views else ev.hits  # how often each voxel was seen (principle 45)
     trusted = ev.trusted()  # voxels seen outside the object's own box from other viewpoints do not shape it
     if trusted is not None:
-        points, all_hits = points[trusted], all_hits[trusted]
+        points, all_hits, seen = points[trusted], all_hits[trusted], seen[trusted]
     # stray points that once joined the object (a background point between a pedestal table's legs) do
-    # not shape it: voxels seen in under a tenth of the best voxel's observations AND away from every
-    # well-seen voxel are ignored — but a voxel seen in _STRAY_MIN_HITS frames is never a stray (principle 39:
-    # a four-legged table's far legs, seen in a few frames while views of its near leg alone piled up)
-    strong = all_hits >= min(max(1.0, 0.1 * float(all_hits.max())), float(_STRAY_MIN_HITS))
+    # not shape it: voxels seen in under a tenth of the best voxel's views AND away from every well-seen
+    # voxel are ignored — but a voxel seen in _STRAY_MIN_VIEWS views is never a stray (principle 39: a
+    # four-legged table's far legs, seen in a few frames while views of its near leg alone piled up). A view
+    # counts once per voxel (``ev.frames``, principle 45): a near leg gives several points a frame, a far one one
+    strong = seen >= min(max(1.0, 0.1 * float(seen.max())), float(_STRAY_MIN_VIEWS))
     n_strong = int(np.count_nonzero(strong))
     if n_strong == len(strong) or n_strong == 0:
         pts, hits = points, all_hits
@@ -143,7 +146,7 @@ def _point_shape(ev: ObjectEvidence) -> tuple[FloatArray, NDArray[np.int64], flo
         pts, hits = points[keep], all_hits[keep]
     th, lo, hi = min_area_rect(pts)
     # the cache holds the arrays it was computed from, so their identities cannot be reused meanwhile
-    ev.shape_cache = (ev.points, ev.hits, (ev.points_revision, ev.outside_ratio), pts, hits, th, lo, hi)
+    ev.shape_cache = (ev.points, ev.hits, key, pts, hits, th, lo, hi)
     return pts, hits, th, lo, hi
 
 

@@ -483,6 +483,12 @@ class ConsciousnessConfig:
         "fits the chair class's largest sofa, the whole chair's boxes do not",
         live=True,
     )
+    hidden_covered_share: float = param(
+        0.5, min=0.0, max=1.0, step=0.05,
+        help="improved, ghost decay: an object whose image columns the boxes of nearer objects reaching above its top cover "
+        "together by more than this share is hidden from the camera: no clear miss (1: only one box covering it whole)",
+        live=True,
+    )
     hidden_behind_own_face: bool = param(
         True,
         help="improved, footprints: the part of an object its points do not show lies behind its own face, not behind "

@@ -222,9 +222,16 @@ def area_candidate(
         legs = pc.legged and all(islands[g].physical_extent <= pc.leg_size_max for g in group)
         ev.observations, ev.leg_obs = 1, int(legs)
         if pc.legged:
-            # a box cut by the image border has no centre line and its wedge holds what stands beside: no telling
-            support = None if cfg.support_whole_boxes and ray_w == 0.0 else _support(group, islands[best], off_best, half, app, pc)
-            ev.support_obs, ev.corner_obs = (1, 0) if support else (0, 0) if support is None and cfg.support_whole_boxes else (0, 1)
+            if cfg.support_whole_boxes and ray_w == 0.0:
+                support = None  # a box cut by the image border has no centre line, its wedge holds what stands beside
+            else:
+                support = _support(group, islands[best], off_best, half, app, pc)
+            if support:
+                ev.support_obs, ev.corner_obs = 1, 0
+            elif support is None and cfg.support_whole_boxes:
+                ev.support_obs, ev.corner_obs = 0, 0  # no telling: neither for nor against one support
+            else:
+                ev.support_obs, ev.corner_obs = 0, 1
         fp = estimate_footprint(ev, pc)
         return (
             Candidate(

@@ -36,8 +36,8 @@ def one_instance(
     (:func:`~app.ocslam.tracks.pedestal` at ``pedestal_fraction``), that one support). With ``fragment_fits_largest``,
     when either was only seen through border-cut boxes (a fragment), its largest instance is enough (the
     other's points may overstate its shape). With ``box_widths``, the instance must also be no wider than
-    the two objects' boxes show it (:func:`wider_than_boxes`). Without points on either side only their
-    footprints can tell: True."""
+    the two objects' boxes show it (:func:`wider_than_boxes`). ``told_only``: a pedestal's share is of the views that
+    told (``consciousness.support_whole_boxes``). Without points on either side only their footprints can tell: True."""
     pa, pb = strong_points(a), strong_points(b)
     if len(pa) == 0 or len(pb) == 0:
         return True
@@ -281,7 +281,7 @@ def resolve_track_collisions(
                         continue
                     apart = cfg.islands_apart and (b.id in a.apart or a.id in b.apart)
                     if apart or not one_instance(a, b, cfg.fragment_fits_largest, float(cfg.pedestal_fraction), cfg.union_width_check,
-                                                     cfg.support_whole_boxes):
+                                                     told_only=cfg.support_whole_boxes):
                         # together larger than one instance: the larger loses the shared points (as a
                         # nested object's, below) and stays if it keeps points of its own; a pedestal's support
                         # is its own whatever its footprint (principle 16: its cross-section is that support)

@@ -4,7 +4,8 @@ A frame is a *clear miss* for an object when its centre projects inside the imag
 ``clear_view_in_frame`` of its outline's image box is inside the image (the detector's labelling rule), that
 part's smaller side is at least ``clear_view_min_px`` (the detector rarely boxes an object that looks smaller),
 it lies within ``decay_max_range_m``, no box of its class covers its bearing, no box of a nearer object covers its
-image columns and top (:func:`hidden_behind`), and the LIDAR does not see something in front of it. An object decays
+image columns and top, nor do such boxes together cover more than ``hidden_covered_share`` of its columns
+(:func:`hidden_behind`), and the LIDAR does not see something in front of it. An object decays
 only once its clear misses outnumber its detections.
 """
 

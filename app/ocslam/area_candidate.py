@@ -222,14 +222,12 @@ def area_candidate(
         legs = pc.legged and all(islands[g].physical_extent <= pc.leg_size_max for g in group)
         ev.observations, ev.leg_obs = 1, int(legs)
         if pc.legged:
-            if cfg.support_whole_boxes and ray_w == 0.0:
-                support = None  # a box cut by the image border has no centre line, its wedge holds what stands beside
-            else:
-                support = _support(group, islands[best], off_best, half, app, pc)
+            support = _support(group, islands[best], off_best, half, app, pc,
+                               whole=not (cfg.support_whole_boxes and ray_w == 0.0))
             if support:
                 ev.support_obs, ev.corner_obs = 1, 0
             elif support is None and cfg.support_whole_boxes:
-                ev.support_obs, ev.corner_obs = 0, 0  # no telling: neither for nor against one support
+                ev.support_obs, ev.corner_obs = 0, 0  # a view that cannot tell counts neither for nor against one support
             else:
                 ev.support_obs, ev.corner_obs = 0, 1
         fp = estimate_footprint(ev, pc)
@@ -288,13 +286,19 @@ def area_candidate(
         islands,
     )
 
-def _support(group: list[int], best: Island, off: float, half: float, app: float, pc: ClassPrior) -> bool | None:
+def _support(
+    group: list[int], best: Island, off: float, half: float, app: float, pc: ClassPrior, whole: bool = True
+) -> bool | None:
     """What one view of a legged object says of a single central support (a pedestal): True for one leg-sized island
     on the box's centre line under a box much wider than it; False for several legs, or one island wider than a leg
     or under a box not much wider; ``None`` (no telling) for one leg-sized island off the centre line or a box of
     unknown width: one leg of a four-legged object whose others are hidden, or a neighbour's leg beside a support
     the LIDAR does not see. ``off``: the island's angular offset from the bisector, ``half`` the box's half-angle
-    (rad); ``app``: the box's width at the island's range (m, NaN if unknown)."""
+    (rad); ``app``: the box's width at the island's range (m, NaN if unknown). ``whole`` False: the box is cut by the
+    image border (``consciousness.support_whole_boxes``): its centre line is unknown and its wedge holds what stands
+    beside the object, so it tells nothing either way (``None``)."""
+    if not whole:
+        return None
     if len(group) != 1 or best.physical_extent > pc.leg_size_max:
         return False
     if not (abs(off) < 0.25 * half and math.isfinite(app)):

@@ -385,9 +385,9 @@ class ConsciousnessConfig:
     support_whole_boxes: bool = param(
         True,
         help="improved: only a box not cut by the image border tells whether a legged object stands on one central "
-        "support (a cut box's centre line is unknown and its wedge holds what stands beside it): a cut view counts "
-        "neither for nor against a pedestal, a pedestal's share is of the views that told, and a group of legs seen "
-        "through a cut box joins a pedestal only at its support",
+        "support (a cut box's centre line is unknown and its wedge holds what stands beside it): a view that cannot "
+        "tell (a cut box, one leg off the centre line) counts neither for nor against a pedestal, a pedestal's share "
+        "is of the views that told, and a group of legs from such a view joins a pedestal only at its support",
         live=True,
     )
     nested_unconfirmed: bool = param(
